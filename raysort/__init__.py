@@ -1,0 +1,1 @@
+"""raysort: ray sorting for fast incoherent packet ray tracing."""

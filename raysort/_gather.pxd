@@ -1,0 +1,2 @@
+# cython: language_level=3
+"""Gather and scatter kernels; see _gather.pyx."""

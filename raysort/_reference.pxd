@@ -1,0 +1,2 @@
+# cython: language_level=3
+"""Brute-force reference kernel; see _reference.pyx."""

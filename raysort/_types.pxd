@@ -1,0 +1,69 @@
+# cython: language_level=3
+"""C-level layouts and kernels of raysort, for Cython modules to cimport.
+
+Declares the structs of ``raysort/include/raysort/types.h`` and the shared
+numeric kernels of ``raysort/include/raysort/simd.h`` (the one SIMD header).
+An outside plugin compiled with ``include_dirs=[raysort.get_include()]`` can
+``from raysort._types cimport rs_rays, rs_box4`` and use exactly the arithmetic
+the built-in traversals use.
+"""
+from libc.stdint cimport int32_t, int64_t, uint8_t, uint16_t
+
+ctypedef float float32_t
+
+
+cdef extern from "raysort/types.h" nogil:
+    enum: RS_MAX_PACKET
+
+    ctypedef struct rs_node:
+        float lo[3]
+        float hi[3]
+        int32_t offset      # right child (inner) or first triangle (leaf)
+        uint16_t count      # 0 for an inner node
+        uint8_t axis
+        uint8_t flags
+
+    ctypedef struct rs_tri:
+        float v0[3]
+        float e1[3]
+        float e2[3]
+        int32_t id          # index in the input mesh
+        int32_t pad[2]
+
+    ctypedef struct rs_rays:
+        const float *o[3]
+        const float *d[3]
+        const float *inv[3]
+        const float *tmin
+        float *t
+        int32_t *prim
+        float *u
+        float *v
+
+    ctypedef struct rs_frustum:
+        float omin[3]
+        float omax[3]
+        float rmin[3]
+        float rmax[3]
+
+    ctypedef struct rs_counters:
+        int64_t rays
+        int64_t ia
+        int64_t box1
+        int64_t box4
+        int64_t tri1
+        int64_t tri4
+
+
+cdef extern from "raysort/simd.h" nogil:
+    const char *rs_simd_name()
+    float rs_minf(float a, float b)
+    float rs_maxf(float a, float b)
+    int rs_active4(const rs_rays *r, int i)
+    int rs_box1(const rs_rays *r, int i, const rs_node *n)
+    int rs_box4(const rs_rays *r, int i, const rs_node *n)
+    int rs_ia_miss(const rs_frustum *f, const rs_node *n)
+    int rs_tri1(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
+    int rs_tri4(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
+    void rs_gather4(float *const dst[11], int32_t *prim, float *u, float *v, int j,
+                    const float *const src[8], const int32_t idx[4])

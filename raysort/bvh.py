@@ -1,0 +1,122 @@
+"""The bounding volume hierarchy every traversal walks.
+
+A binary BVH built with binned SAH (Cython, nogil) and stored as a flat
+depth-first array of 32-byte nodes, exposed as the NumPy structured dtype
+:data:`NODE_DTYPE` (the C struct ``rs_node`` of ``raysort/types.h``).
+Triangles are stored in BVH order as :data:`TRI_DTYPE` records (``v0``,
+edges ``e1``/``e2`` and the input index ``id``), ready for Moller-Trumbore.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from raysort import _bvh
+from raysort.errors import ConfigError, SceneError
+
+__all__ = ["BVH", "NODE_DTYPE", "TRI_DTYPE", "prepare_triangles"]
+
+NODE_DTYPE = np.dtype([
+    ("lo", "<f4", (3,)), ("hi", "<f4", (3,)),
+    ("offset", "<i4"), ("count", "<u2"), ("axis", "u1"), ("flags", "u1"),
+])
+TRI_DTYPE = np.dtype([
+    ("v0", "<f4", (3,)), ("e1", "<f4", (3,)), ("e2", "<f4", (3,)),
+    ("id", "<i4"), ("pad", "<i4", (2,)),
+])
+assert NODE_DTYPE.itemsize == 32 and TRI_DTYPE.itemsize == 48
+
+
+def _check_mesh(vertices, faces):
+    vertices = np.ascontiguousarray(vertices, dtype=np.float32)
+    faces = np.ascontiguousarray(faces, dtype=np.int32)
+    if vertices.ndim != 2 or vertices.shape[1] != 3:
+        raise SceneError(f"vertices must have shape (n, 3), got {vertices.shape}")
+    if faces.ndim != 2 or faces.shape[1] != 3:
+        raise SceneError(f"faces must have shape (m, 3), got {faces.shape}")
+    if len(faces) == 0:
+        raise SceneError("the mesh has no faces")
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise SceneError(f"face indices must lie in [0, {len(vertices)}), "
+                         f"found {faces.min()}..{faces.max()}")
+    if not np.isfinite(vertices).all():
+        bad = int(np.flatnonzero(~np.isfinite(vertices).all(axis=1))[0])
+        raise SceneError(f"vertex {bad} is not finite: {vertices[bad].tolist()}")
+    return vertices, faces
+
+
+def prepare_triangles(vertices, faces):
+    """Triangles in input order as :data:`TRI_DTYPE` (what brute force tests)."""
+    vertices, faces = _check_mesh(vertices, faces)
+    tris = np.zeros(len(faces), dtype=TRI_DTYPE)
+    _bvh.triangles(vertices, faces, tris.view(np.uint8).reshape(-1))
+    return tris
+
+
+class BVH:
+    """A binned-SAH BVH over a triangle mesh.
+
+    Parameters
+    ----------
+    vertices : float32 (n, 3)
+    faces : int32 (m, 3)
+    max_leaf : int, default 8
+        a node with more triangles is always split.
+    bins : int, default 16
+        SAH bins per axis (1..64).
+
+    Attributes
+    ----------
+    nodes : NODE_DTYPE array, depth first (root first)
+    triangles : TRI_DTYPE array in BVH order
+    order : int32 array, ``triangles[p]`` is input triangle ``order[p]``
+    depth : int, number of levels
+    bounds : float32 (2, 3), the root box
+    """
+
+    def __init__(self, vertices, faces, *, max_leaf=8, bins=16):
+        if not (isinstance(max_leaf, (int, np.integer)) and 1 <= max_leaf <= 65535):
+            raise ConfigError(f"max_leaf must be an integer in 1..65535, got {max_leaf!r}")
+        if not (isinstance(bins, (int, np.integer)) and 1 <= bins <= 64):
+            raise ConfigError(f"bins must be an integer in 1..64, got {bins!r}")
+        vertices, faces = _check_mesh(vertices, faces)
+        self.max_leaf, self.bins = int(max_leaf), int(bins)
+        n = len(faces)
+        nodes = np.zeros(2 * n, dtype=NODE_DTYPE)
+        self.order = np.zeros(n, dtype=np.int32)
+        self.triangles = np.zeros(n, dtype=TRI_DTYPE)
+        n_nodes, self.depth = _bvh.build(
+            vertices, faces, self.max_leaf, self.bins, nodes.view(np.uint8).reshape(-1),
+            self.order, self.triangles.view(np.uint8).reshape(-1))
+        self.nodes = nodes[:n_nodes].copy()
+        self._faces = faces
+
+    @property
+    def bounds(self):
+        return np.stack([self.nodes[0]["lo"], self.nodes[0]["hi"]]).astype(np.float32)
+
+    def refit(self, vertices):
+        """Move the triangles to new positions of the same vertices and refit the boxes."""
+        vertices, faces = _check_mesh(vertices, self._faces)
+        _bvh.refit(vertices, faces, self.order, self.nodes.view(np.uint8).reshape(-1),
+                   self.triangles.view(np.uint8).reshape(-1))
+
+    def stats(self):
+        """Node, leaf and depth figures and the SAH cost (C_trav = C_isec = 1)."""
+        nodes = self.nodes
+        leaf = nodes["count"] > 0
+        ext = nodes["hi"] - nodes["lo"]
+        area = ext[:, 0] * ext[:, 1] + ext[:, 1] * ext[:, 2] + ext[:, 2] * ext[:, 0]
+        root = max(float(area[0]), 1e-30)
+        sah = (area[~leaf].sum() + (area[leaf] * nodes["count"][leaf]).sum()) / root
+        return {
+            "nodes": int(len(nodes)),
+            "leaves": int(leaf.sum()),
+            "depth": int(self.depth),
+            "mean_leaf_size": float(nodes["count"][leaf].mean()),
+            "max_leaf_size": int(nodes["count"][leaf].max()),
+            "sah_cost": float(sah),
+        }
+
+    def __repr__(self):
+        return (f"BVH(triangles={len(self.triangles)}, nodes={len(self.nodes)}, "
+                f"depth={self.depth})")

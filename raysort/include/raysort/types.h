@@ -1,0 +1,74 @@
+/* raysort: C-level data layouts shared by every kernel.
+ *
+ * These structs are declared again in raysort/_types.pxd so that Cython
+ * modules (ours and outside plugins) can use them, and mirrored by NumPy
+ * structured dtypes in raysort/bvh.py.  Keep all three in step.
+ */
+#ifndef RAYSORT_TYPES_H
+#define RAYSORT_TYPES_H
+
+#include <stdint.h>
+
+/* Widest sub-packet a traversal accepts (rays).  Large packets are 32x32 by
+ * default; 64x64 tiles are the most the pipeline makes. */
+#define RS_MAX_PACKET 4096
+
+/* One node of the flat, depth-first binary BVH: 32 bytes.
+ * Inner node (count == 0): the left child is the next node, the right child
+ * is `offset`.  Leaf (count > 0): triangles [offset, offset + count) of the
+ * BVH-ordered triangle array. */
+typedef struct rs_node {
+    float lo[3];        /* box minimum */
+    float hi[3];        /* box maximum */
+    int32_t offset;     /* right child (inner) or first triangle (leaf) */
+    uint16_t count;     /* 0 for an inner node, else number of triangles */
+    uint8_t axis;       /* split axis of an inner node (0, 1, 2) */
+    uint8_t flags;      /* reserved, 0 */
+} rs_node;
+
+/* A triangle prepared for Moller-Trumbore: 48 bytes.  `id` is the index of
+ * the triangle in the input mesh; ties in t go to the lower id. */
+typedef struct rs_tri {
+    float v0[3];        /* first vertex */
+    float e1[3];        /* v1 - v0 */
+    float e2[3];        /* v2 - v0 */
+    int32_t id;         /* primitive index in the input mesh */
+    int32_t pad[2];
+} rs_tri;
+
+/* A batch of gathered rays in structure-of-arrays form.  Every row has the
+ * batch capacity (a multiple of 4) and starts 16-byte aligned, so lanes
+ * [4k, 4k+4) can be loaded with one aligned SSE load.
+ *
+ * A lane is active while tmin[i] < t[i].  Padding lanes and invalid rays are
+ * stored inactive (tmin = +inf, t = -inf).  Traversals shrink t[i] as they
+ * find closer hits; an any-hit query sets t[i] = -inf when it finds one. */
+typedef struct rs_rays {
+    const float *o[3];  /* origin */
+    const float *d[3];  /* direction */
+    const float *inv[3];/* 1 / direction, computed during the gather */
+    const float *tmin;  /* hits need t > tmin */
+    float *t;           /* closest hit so far; starts at the ray's tmax */
+    int32_t *prim;      /* primitive of the closest hit, -1 while none */
+    float *u;           /* barycentric coordinates of the hit */
+    float *v;
+} rs_rays;
+
+/* Conservative interval-arithmetic bounds of one packet (Wald et al. 2007):
+ * the ranges of origins and reciprocal directions over its active rays. */
+typedef struct rs_frustum {
+    float omin[3], omax[3];
+    float rmin[3], rmax[3];
+} rs_frustum;
+
+/* The work counters of the paper's Table I, per traversal call. */
+typedef struct rs_counters {
+    int64_t rays;       /* rays submitted (active lanes) */
+    int64_t ia;         /* interval-arithmetic (frustum) box tests */
+    int64_t box1;       /* scalar ray-box tests */
+    int64_t box4;       /* 4-wide SIMD ray-box tests */
+    int64_t tri1;       /* scalar ray-triangle tests */
+    int64_t tri4;       /* 4-wide SIMD ray-triangle tests */
+} rs_counters;
+
+#endif

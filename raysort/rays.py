@@ -1,0 +1,212 @@
+"""Ray batches, hit records and gathered sub-packets (structure of arrays).
+
+Three containers move rays through the pipeline:
+
+:class:`RayBatch`
+    rays in the order a generator or shader made them: one float32 array of
+    rows ``ox oy oz dx dy dz tmin tmax``.  This is what sorters read.
+:class:`Packets`
+    the same rays gathered by the framework into sub-packets, in a sorter's
+    order, each sub-packet starting at a multiple of 4 (16-byte aligned), with
+    inverse directions computed on the way.  This is what traversals read and
+    write.  Padding lanes and invalid rays (NaN, infinite, ``tmin < 0`` or
+    ``tmin >= tmax``) are stored inactive.
+:class:`Hits`
+    the closest hit of every ray, scattered back to the batch order:
+    ``t`` (+inf on a miss), ``prim`` (-1 on a miss), ``u``, ``v``.
+
+Every row is 16-byte aligned and the capacity is a multiple of 4, so a kernel
+can use aligned 4-wide loads on lanes ``[4k, 4k + 4)``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from raysort import _gather
+from raysort.errors import ConfigError
+
+__all__ = ["RayBatch", "Packets", "Hits", "aligned_empty", "gather", "scatter", "scatter_occluded"]
+
+RAY_ROWS = ("ox", "oy", "oz", "dx", "dy", "dz", "tmin", "tmax")
+PACKET_ROWS = ("ox", "oy", "oz", "dx", "dy", "dz", "ix", "iy", "iz", "tmin", "t")
+ALIGN = 16
+MAX_PACKET = 4096  # RS_MAX_PACKET in include/raysort/types.h
+
+
+def _round4(n):
+    return (int(n) + 3) & ~3
+
+
+def aligned_empty(shape, dtype, align=ALIGN):
+    """An uninitialised C-contiguous array whose data starts ``align``-aligned."""
+    dtype = np.dtype(dtype)
+    nbytes = int(np.prod(shape)) * dtype.itemsize
+    raw = np.empty(nbytes + align, dtype=np.uint8)
+    start = (-raw.ctypes.data) % align
+    return raw[start:start + nbytes].view(dtype).reshape(shape)
+
+
+class RayBatch:
+    """``n`` rays as float32 rows ``ox oy oz dx dy dz tmin tmax``.
+
+    ``data`` has shape ``(8, capacity)``; lanes past ``n`` are padding and
+    inactive.  The row views (``origins``, ``directions``, ``tmin``, ``tmax``)
+    cover the first ``n`` lanes only.
+    """
+
+    __slots__ = ("data", "n")
+
+    def __init__(self, n):
+        n = int(n)
+        if n < 0:
+            raise ConfigError(f"a ray batch needs n >= 0 rays, got {n}")
+        self.n = n
+        self.data = aligned_empty((8, max(_round4(n), 4)), np.float32)
+        self.data[:] = 0.0
+        self.data[6, n:] = np.inf
+        self.data[7, n:] = -np.inf
+
+    @classmethod
+    def from_arrays(cls, origins, directions, tmin=0.0, tmax=np.inf):
+        """Rays from ``(n, 3)`` origins and directions; tmin/tmax scalar or ``(n,)``."""
+        origins = np.asarray(origins, dtype=np.float32)
+        directions = np.asarray(directions, dtype=np.float32)
+        if origins.ndim != 2 or origins.shape[1] != 3 or directions.shape != origins.shape:
+            raise ConfigError(
+                f"origins and directions must both have shape (n, 3), got "
+                f"{origins.shape} and {directions.shape}")
+        batch = cls(len(origins))
+        batch.origins[:] = origins.T
+        batch.directions[:] = directions.T
+        batch.tmin[:] = tmin
+        batch.tmax[:] = tmax
+        return batch
+
+    def __len__(self):
+        return self.n
+
+    def __repr__(self):
+        return f"RayBatch(n={self.n})"
+
+    @property
+    def origins(self):
+        """``(3, n)`` view of the origins."""
+        return self.data[0:3, :self.n]
+
+    @property
+    def directions(self):
+        """``(3, n)`` view of the directions."""
+        return self.data[3:6, :self.n]
+
+    @property
+    def tmin(self):
+        return self.data[6, :self.n]
+
+    @property
+    def tmax(self):
+        return self.data[7, :self.n]
+
+    def take(self, index):
+        """A new batch holding the rays ``index`` (an integer array), in that order."""
+        index = np.asarray(index, dtype=np.intp)
+        out = RayBatch(len(index))
+        out.data[:, :len(index)] = self.data[:, index]
+        return out
+
+
+class Hits:
+    """Closest hits in batch order: ``t`` (+inf on a miss), ``prim`` (-1), ``u``, ``v``."""
+
+    __slots__ = ("t", "prim", "u", "v")
+
+    def __init__(self, n):
+        self.t = np.full(n, np.inf, dtype=np.float32)
+        self.prim = np.full(n, -1, dtype=np.int32)
+        self.u = np.zeros(n, dtype=np.float32)
+        self.v = np.zeros(n, dtype=np.float32)
+
+    def __len__(self):
+        return len(self.t)
+
+    def __repr__(self):
+        return f"Hits(n={len(self)}, hit={int((self.prim >= 0).sum())})"
+
+
+class Packets:
+    """Rays gathered into 16-byte aligned sub-packets, ready for a traversal.
+
+    Attributes
+    ----------
+    rows : float32 (11, capacity)
+        ``ox oy oz dx dy dz ix iy iz tmin t``; ``t`` starts at the ray's tmax
+        and is lowered by the traversal as it finds closer hits.
+    prim, u, v : (capacity,)
+        hit record being built by the traversal (prim -1 = none yet).
+    starts, counts : int32 (n_packets,)
+        sub-packet k occupies lanes ``[starts[k], starts[k] + counts[k])``;
+        every start is a multiple of 4 and lanes up to the next multiple of 4
+        are inactive padding.
+    index : int32 (capacity,)
+        the batch index of the ray in each lane, -1 for padding.
+    """
+
+    __slots__ = ("rows", "prim", "u", "v", "starts", "counts", "index")
+
+    def __init__(self, counts):
+        counts = np.asarray(counts, dtype=np.int32)
+        padded = (counts.astype(np.int64) + 3) & ~3
+        self.counts = counts
+        self.starts = np.zeros(len(counts), dtype=np.int32)
+        if len(counts):
+            np.cumsum(padded[:-1], out=self.starts[1:])
+        capacity = max(int(padded.sum()), 4)
+        self.rows = aligned_empty((len(PACKET_ROWS), capacity), np.float32)
+        self.prim = aligned_empty((capacity,), np.int32)
+        self.u = aligned_empty((capacity,), np.float32)
+        self.v = aligned_empty((capacity,), np.float32)
+        self.index = aligned_empty((capacity,), np.int32)
+
+    @property
+    def n_packets(self):
+        return len(self.counts)
+
+    @property
+    def capacity(self):
+        return self.rows.shape[1]
+
+    @property
+    def t(self):
+        return self.rows[10]
+
+    def __repr__(self):
+        return f"Packets(n_packets={self.n_packets}, rays={int(self.counts.sum())})"
+
+
+def gather(rays, order, offsets):
+    """Gather ``rays`` into aligned sub-packets.
+
+    Sub-packet k holds the rays ``order[offsets[k]:offsets[k + 1]]``.  The
+    copy runs four rays at a time with SIMD stores and computes the inverse
+    directions; the sorter's output must already be validated.
+    """
+    counts = np.diff(np.asarray(offsets, dtype=np.int32))
+    packets = Packets(counts)
+    _gather.gather(rays.data, np.ascontiguousarray(order, dtype=np.int32),
+                   np.ascontiguousarray(offsets, dtype=np.int32), packets.starts,
+                   packets.rows, packets.prim, packets.u, packets.v, packets.index)
+    return packets
+
+
+def scatter(packets, n, hits=None):
+    """Copy the closest hits of ``packets`` back to batch order (a new or given :class:`Hits`)."""
+    hits = Hits(n) if hits is None else hits
+    _gather.scatter(packets.rows, packets.prim, packets.u, packets.v, packets.index,
+                    hits.t, hits.prim, hits.u, hits.v)
+    return hits
+
+
+def scatter_occluded(packets, n):
+    """For an any-hit query: a bool array, True where the ray found any hit."""
+    occluded = np.zeros(n, dtype=np.uint8)
+    _gather.scatter_occluded(packets.prim, packets.index, occluded)
+    return occluded.view(bool)

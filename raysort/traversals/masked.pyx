@@ -1,0 +1,83 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+"""``masked``: masked packet traversal (Wald, Slusallek, Benthin, Wagner 2001).
+
+The whole sub-packet descends together.  At every node each 4-ray group that
+still has an active lane gets one SIMD slab test; the lanes that hit form the
+mask the children inherit, and a node is entered if any lane hits.
+"""
+from libc.stdint cimport int32_t, uint8_t
+from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box4, rs_tri4, rs_active4
+from raysort.traversals._common cimport (Geometry, Scratch, run, lowest_bit, left_first)
+
+from raysort.plugin import Traversal
+
+
+cdef void trace_masked(const Geometry *g, rs_rays *r, int start, int count, int any_hit,
+                       Scratch *w, rs_counters *c) noexcept nogil:
+    cdef int groups = (count + 3) // 4, sp, node, level, j, k, hits, lane
+    cdef int32_t *stack = w.stack
+    cdef uint8_t *parent
+    cdef uint8_t *mask
+    cdef const rs_node *n
+    # level 0 holds the lanes active on entry; a node at level L reads the
+    # masks of level L and writes its children's masks into level L + 1
+    for j in range(groups):
+        w.masks[j] = <uint8_t> rs_active4(r, start + 4 * j)
+    stack[0] = 0
+    stack[1] = 0
+    sp = 1
+    while sp > 0:
+        sp -= 1
+        node = stack[2 * sp]
+        level = stack[2 * sp + 1]
+        n = &g.nodes[node]
+        parent = w.masks + level * groups
+        mask = parent + groups
+        hits = 0
+        for j in range(groups):
+            if parent[j]:
+                c.box4 += 1
+                mask[j] = <uint8_t> (rs_box4(r, start + 4 * j, n) & parent[j])
+                hits |= mask[j]
+            else:
+                mask[j] = 0
+        if not hits:
+            continue
+        if n.count:
+            for k in range(n.offset, n.offset + n.count):
+                for j in range(groups):
+                    if mask[j]:
+                        c.tri4 += 1
+                        rs_tri4(r, start + 4 * j, &g.tris[k], any_hit)
+            continue
+        j = 0
+        while not mask[j]:
+            j += 1
+        lane = start + 4 * j + lowest_bit(mask[j])
+        if left_first(n, r, lane):
+            stack[2 * sp] = n.offset
+            stack[2 * sp + 2] = node + 1
+        else:
+            stack[2 * sp] = node + 1
+            stack[2 * sp + 2] = n.offset
+        stack[2 * sp + 1] = level + 1
+        stack[2 * sp + 3] = level + 1
+        sp += 2
+
+
+class MaskedTraversal(Traversal):
+    """Masked packet traversal (Wald et al. 2001), all SIMD.
+
+    Every node visit costs one SIMD box test per 4-ray group that still has
+    an active lane; every leaf costs one SIMD triangle test per triangle and
+    per group whose mask is non-empty.  No IA tests, no scalar tests.
+
+    ==========  ======  =======  ==========================================
+    parameter   type    default  meaning
+    ==========  ======  =======  ==========================================
+    (none)
+    ==========  ======  =======  ==========================================
+    """
+
+    def intersect(self, bvh, packets, any_hit=False):
+        return run(trace_masked, bvh, packets, any_hit)

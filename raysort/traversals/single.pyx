@@ -1,0 +1,60 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+"""``single``: one ray at a time, the scalar reference traversal."""
+from libc.stdint cimport int32_t
+from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box1, rs_tri1
+from raysort.traversals._common cimport Geometry, Scratch, run, active, left_first
+
+from raysort.plugin import Traversal
+
+
+cdef void trace_single(const Geometry *g, rs_rays *r, int start, int count, int any_hit,
+                       Scratch *w, rs_counters *c) noexcept nogil:
+    cdef int i, k, node, sp
+    cdef const rs_node *n
+    cdef int32_t *stack = w.stack
+    for i in range(start, start + count):
+        if not active(r, i):
+            continue
+        sp = 0
+        node = 0
+        while True:
+            n = &g.nodes[node]
+            c.box1 += 1
+            if rs_box1(r, i, n):
+                if n.count == 0:
+                    if left_first(n, r, i):
+                        stack[sp] = n.offset
+                        node = node + 1
+                    else:
+                        stack[sp] = node + 1
+                        node = n.offset
+                    sp += 1
+                    continue
+                for k in range(n.offset, n.offset + n.count):
+                    c.tri1 += 1
+                    rs_tri1(r, i, &g.tris[k], any_hit)
+                if not active(r, i):    # an any-hit query found its hit
+                    break
+            if sp == 0:
+                break
+            sp -= 1
+            node = stack[sp]
+
+
+class SingleTraversal(Traversal):
+    """Scalar depth-first traversal of one ray at a time.
+
+    The reference every packet traversal is compared with: each ray walks the
+    BVH alone, testing every node it reaches with a scalar slab test and
+    visiting the child on the side its direction points to first.  Counts
+    scalar N_B and scalar N_T only.
+
+    ==========  ======  =======  ==========================================
+    parameter   type    default  meaning
+    ==========  ======  =======  ==========================================
+    (none)
+    ==========  ======  =======  ==========================================
+    """
+
+    def intersect(self, bvh, packets, any_hit=False):
+        return run(trace_single, bvh, packets, any_hit)

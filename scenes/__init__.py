@@ -1,0 +1,1 @@
+"""Scenes that ship with raysort (meshes, cameras, materials)."""

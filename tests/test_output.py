@@ -1,0 +1,503 @@
+"""Tests for raysort.output: EXR and PNG writers, atomic writes, path errors."""
+
+import os
+import struct
+import zlib
+
+import numpy as np
+import pytest
+
+from raysort import output
+from raysort.errors import OutputError, RaysortError
+
+OpenEXR = pytest.importorskip("OpenEXR")
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _bits(a):
+    return np.asarray(a, dtype=np.float32).view(np.uint32)
+
+
+def _special_image():
+    """A non-square float32 image with zeros, tiny, huge and infinite values."""
+    rng = np.random.default_rng(1)
+    image = rng.standard_normal((5, 7, 3)).astype(np.float32) * 1000
+    image[0, 0] = [0.0, -0.0, 1e-45]                     # zero, -0, denormal
+    image[0, 1] = [np.finfo(np.float32).tiny, 1e-30, -1e-40]
+    image[0, 2] = [np.finfo(np.float32).max, 3e38, -np.finfo(np.float32).max]
+    image[0, 3] = [np.inf, -np.inf, 1e30]
+    image[0, 4] = [np.nan, 1.0, 0.1]
+    return image
+
+
+def _listdir(path):
+    return sorted(os.listdir(path))
+
+
+# --------------------------------------------------------------------------
+# EXR
+# --------------------------------------------------------------------------
+
+def test_exr_round_trip_is_bit_exact(tmp_path):
+    image = _special_image()
+    target = tmp_path / "out.exr"
+    output.write_exr(target, image)
+    back = output.read_exr(target)
+    assert back.dtype == np.float32
+    assert back.shape == (5, 7, 3)
+    np.testing.assert_array_equal(_bits(back), _bits(image))
+    assert _listdir(tmp_path) == ["out.exr"]
+
+
+def test_exr_file_layout(tmp_path):
+    target = tmp_path / "out.exr"
+    output.write_exr(target, np.ones((2, 3, 3), np.float32))
+    exr = OpenEXR.File(str(target), separate_channels=True)
+    header = exr.header()
+    assert header["compression"] == OpenEXR.ZIP_COMPRESSION
+    assert header["type"] == OpenEXR.scanlineimage
+    channels = exr.channels()
+    assert sorted(channels) == ["B", "G", "R"]
+    for channel in channels.values():
+        assert channel.type() == OpenEXR.FLOAT
+        assert channel.pixels.shape == (2, 3)
+
+
+def test_exr_non_contiguous_input(tmp_path):
+    # OpenEXR ignores numpy strides, so views must be copied before writing.
+    base = np.arange(4 * 6 * 3, dtype=np.float32).reshape(6, 4, 3)
+    view = base.transpose(1, 0, 2)[:, ::2]
+    assert not view.flags["C_CONTIGUOUS"]
+    target = tmp_path / "view.exr"
+    output.write_exr(target, view)
+    np.testing.assert_array_equal(output.read_exr(target), view)
+
+
+def test_exr_float64_converted(tmp_path):
+    image = np.linspace(-2.0, 1e6, 2 * 4 * 3).reshape(2, 4, 3) + 1e-9
+    target = tmp_path / "out.exr"
+    output.write_exr(target, image)
+    back = output.read_exr(target)
+    assert back.dtype == np.float32
+    np.testing.assert_array_equal(_bits(back), _bits(image.astype(np.float32)))
+
+
+@pytest.mark.parametrize("shape", [(4, 4), (4, 4, 4), (4, 4, 1), (0, 4, 3),
+                                   (1, 4, 4, 3)])
+def test_exr_wrong_shape_rejected(tmp_path, shape):
+    with pytest.raises(ValueError, match=str(shape).replace("(", r"\(")
+                       .replace(")", r"\)")):
+        output.write_exr(tmp_path / "x.exr", np.zeros(shape, np.float32))
+    assert _listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.int32, np.float16, bool])
+def test_exr_wrong_dtype_rejected(tmp_path, dtype):
+    with pytest.raises(ValueError, match="float32"):
+        output.write_exr(tmp_path / "x.exr", np.zeros((2, 2, 3), dtype))
+    assert _listdir(tmp_path) == []
+
+
+def test_exr_metadata_round_trip(tmp_path):
+    target = tmp_path / "out.exr"
+    metadata = {"raysort_version": "0.1.0",
+                "raysort_settings": '{"spp": 16, "sorter": "morton"}',
+                "comments": "ünïcode ✓", "empty": "", "k" * 255: "long name"}
+    output.write_exr(target, np.zeros((1, 1, 3)), metadata=metadata)
+    header = OpenEXR.File(str(target), header_only=True).header()
+    for key, value in metadata.items():
+        assert header[key] == value
+
+
+@pytest.mark.parametrize("metadata, error", [
+    ({"version": 1}, TypeError),
+    ({1: "x"}, TypeError),
+    (["a"], TypeError),
+    ({"": "x"}, ValueError),
+    ({"a\0b": "x"}, ValueError),
+    ({"k" * 256: "x"}, ValueError),        # OpenEXR would truncate silently
+    ({"compression": "none"}, ValueError),
+    ({"dataWindow": "x"}, ValueError),
+    ({"name": "beauty"}, ValueError),       # a str OpenEXR would accept
+    ({"chromaticities": "x"}, ValueError),  # typed standard attribute
+])
+def test_exr_bad_metadata_rejected_before_writing(tmp_path, monkeypatch,
+                                                 metadata, error):
+    def no_temp_file(*args, **kwargs):
+        raise AssertionError("a temporary file was created")
+
+    monkeypatch.setattr(output.tempfile, "mkstemp", no_temp_file)
+    with pytest.raises(error):
+        output.write_exr(tmp_path / "x.exr", np.zeros((1, 1, 3)),
+                         metadata=metadata)
+    assert _listdir(tmp_path) == []
+
+
+def test_read_exr_missing_file(tmp_path):
+    path = tmp_path / "missing.exr"
+    with pytest.raises(OutputError, match="does not exist") as info:
+        output.read_exr(path)
+    assert str(path) in str(info.value)
+
+
+@pytest.mark.parametrize("content", [b"", b"hello world", b"\x76\x2f\x31\x01junk"])
+def test_read_exr_not_an_exr(tmp_path, content):
+    path = tmp_path / "bad.exr"
+    path.write_bytes(content)
+    with pytest.raises(OutputError) as info:
+        output.read_exr(path)
+    assert str(path) in str(info.value)
+
+
+def test_read_exr_directory(tmp_path):
+    with pytest.raises(OutputError, match="directory"):
+        output.read_exr(tmp_path)
+
+
+def test_read_exr_without_rgb(tmp_path):
+    path = tmp_path / "y.exr"
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION,
+                  "type": OpenEXR.scanlineimage},
+                 {"Y": np.zeros((2, 2), np.float32)}).write(str(path))
+    with pytest.raises(OutputError, match="R, G, B"):
+        output.read_exr(path)
+
+
+# --------------------------------------------------------------------------
+# PNG
+# --------------------------------------------------------------------------
+
+def _png_of(tmp_path, values, **kw):
+    image = np.array(values, dtype=np.float64).reshape(1, -1, 1).repeat(3, axis=2)
+    target = tmp_path / "p.png"
+    output.write_png(target, image, **kw)
+    back = output.read_png(target)
+    assert back.dtype == np.uint8 and back.shape == image.shape
+    assert (back == back[..., :1]).all()
+    return back[0, :, 0].tolist()
+
+
+def test_png_known_values(tmp_path):
+    values = [0.0, 1.0, 0.5, 1.5, 1e30, np.inf, -0.5, -np.inf, np.nan,
+              0.002, 0.0031308, 0.18]
+    # 0.5 -> sRGB 0.7354 -> 187.5 -> 188; 0.002 -> 12.92*0.002*255 = 6.6 -> 7
+    expected = [0, 255, 188, 255, 255, 255, 0, 0, 0, 7, 10, 118]
+    assert _png_of(tmp_path, values) == expected
+
+
+def test_png_exposure(tmp_path):
+    assert _png_of(tmp_path, [0.25, 0.5, 0.6, 0.0, np.nan],
+                   exposure=1) == [188, 255, 255, 0, 0]
+    assert _png_of(tmp_path, [1.0, 2.0, 4.0], exposure=-1) == [188, 255, 255]
+
+
+def test_png_exact_srgb_curve():
+    linear = np.linspace(0.0, 1.0, 10001)
+    srgb = np.where(linear <= 0.0031308, 12.92 * linear,
+                    1.055 * linear ** (1 / 2.4) - 0.055)
+    expected = np.floor(srgb * 255 + 0.5)
+    got = output.tone_map(linear).astype(float)
+    # rint rounds exact halves to even; no sample is within 1e-9 of a half
+    assert np.array_equal(got, expected)
+
+
+def test_png_rejects_bad_input(tmp_path):
+    with pytest.raises(ValueError, match=r"\(2, 2\)"):
+        output.write_png(tmp_path / "x.png", np.zeros((2, 2)))
+    with pytest.raises(ValueError, match="exposure"):
+        output.write_png(tmp_path / "x.png", np.zeros((2, 2, 3)),
+                         exposure=float("nan"))
+    assert _listdir(tmp_path) == []
+
+
+def _parse_png(data):
+    """Independent PNG check: signature, chunk structure, CRCs."""
+    assert data[:8] == PNG_SIGNATURE
+    chunks, pos = [], 8
+    while pos < len(data):
+        (length,) = struct.unpack(">I", data[pos:pos + 4])
+        kind = data[pos + 4:pos + 8]
+        payload = data[pos + 8:pos + 8 + length]
+        (crc,) = struct.unpack(">I", data[pos + 8 + length:pos + 12 + length])
+        assert len(payload) == length
+        assert crc == zlib.crc32(kind + payload) & 0xFFFFFFFF, kind
+        chunks.append((kind, payload))
+        pos += 12 + length
+    assert pos == len(data)
+    return chunks
+
+
+@pytest.mark.parametrize("idat_size", [None, 97])
+def test_png_is_valid_independently(tmp_path, monkeypatch, idat_size):
+    if idat_size:
+        monkeypatch.setattr(output, "_IDAT_SIZE", idat_size)
+    height, width = 9, 13
+    rng = np.random.default_rng(2)
+    image = rng.uniform(-0.1, 1.2, (height, width, 3))
+    target = tmp_path / "v.png"
+    output.write_png(target, image)
+    chunks = _parse_png(target.read_bytes())
+    kinds = [kind for kind, _ in chunks]
+    assert kinds[0] == b"IHDR" and kinds[-1] == b"IEND"
+    assert set(kinds[1:-1]) == {b"IDAT"}
+    if idat_size:
+        assert len(kinds) > 3
+    assert chunks[-1][1] == b""
+    assert struct.unpack(">IIBBBBB", chunks[0][1]) == (width, height, 8, 2, 0, 0, 0)
+    raw = zlib.decompress(b"".join(p for k, p in chunks if k == b"IDAT"))
+    assert len(raw) == height * (1 + 3 * width)
+    rows = np.frombuffer(raw, np.uint8).reshape(height, 1 + 3 * width)
+    assert not rows[:, 0].any()
+    expected = output.tone_map(image.astype(np.float32))
+    assert np.array_equal(rows[:, 1:].reshape(height, width, 3), expected)
+    assert np.array_equal(output.read_png(target), expected)
+
+
+def _corrupt(tmp_path, data):
+    path = tmp_path / "bad.png"
+    path.write_bytes(data)
+    with pytest.raises(OutputError) as info:
+        output.read_png(path)
+    assert str(path) in str(info.value)
+    return str(info.value)
+
+
+def test_read_png_checks_signature_and_crc(tmp_path):
+    output.write_png(tmp_path / "good.png", np.full((2, 3, 3), 0.5))
+    good = (tmp_path / "good.png").read_bytes()
+    assert "not a PNG" in _corrupt(tmp_path, b"\x89PNX" + good[4:])
+    # flip a byte inside the IHDR payload (offset 8 + 8 = first payload byte)
+    broken = bytearray(good)
+    broken[18] ^= 0xFF
+    assert "CRC" in _corrupt(tmp_path, bytes(broken))
+    # flip the last byte of the IDAT CRC
+    idat_end = good.index(b"IEND") - 4
+    broken = bytearray(good)
+    broken[idat_end - 1] ^= 0x01
+    assert "CRC" in _corrupt(tmp_path, bytes(broken))
+    assert "truncated" in _corrupt(tmp_path, good[:-6])
+    assert "IEND" in _corrupt(tmp_path, good[:good.index(b"IEND") - 4])
+
+
+def test_read_png_missing(tmp_path):
+    with pytest.raises(OutputError, match="does not exist"):
+        output.read_png(tmp_path / "missing.png")
+
+
+# --------------------------------------------------------------------------
+# Atomic writes
+# --------------------------------------------------------------------------
+
+class Boom(Exception):
+    pass
+
+
+@pytest.mark.parametrize("exc", [Boom, KeyboardInterrupt])
+def test_exr_failure_leaves_no_temp_and_keeps_target(tmp_path, monkeypatch, exc):
+    target = tmp_path / "out.exr"
+    target.write_bytes(b"old content")
+    real = output._write_exr_file
+    seen = []
+
+    def write_then_fail(exr, tmp, path):
+        real(exr, tmp, path)                      # the temp file is complete
+        assert os.path.dirname(tmp) == str(tmp_path)
+        assert os.path.getsize(tmp) > 0
+        seen.append(tmp)
+        raise exc("interrupted")
+
+    monkeypatch.setattr(output, "_write_exr_file", write_then_fail)
+    with pytest.raises(exc):
+        output.write_exr(target, np.ones((4, 4, 3)))
+    assert seen and not os.path.exists(seen[0])
+    assert _listdir(tmp_path) == ["out.exr"]
+    assert target.read_bytes() == b"old content"
+
+
+def test_exr_library_error_becomes_output_error(tmp_path, monkeypatch):
+    class FailingFile:
+        def write(self, name):
+            with open(name, "wb") as file:
+                file.write(b"\x76\x2f\x31\x01partial")
+            raise RuntimeError("disk on fire")
+
+    monkeypatch.setattr(output, "_exr_file", lambda *args: FailingFile())
+    target = tmp_path / "out.exr"
+    with pytest.raises(OutputError, match="disk on fire") as info:
+        output.write_exr(target, np.ones((1, 1, 3)))
+    assert str(target) in str(info.value)
+    assert _listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("exc, raised", [(OSError(28, "No space left on device"),
+                                          OutputError),
+                                         (KeyboardInterrupt(), KeyboardInterrupt)])
+def test_png_failure_leaves_no_temp_and_keeps_target(tmp_path, monkeypatch,
+                                                     exc, raised):
+    target = tmp_path / "out.png"
+    target.write_bytes(b"old png")
+    seen = []
+
+    def write_half(path, data):
+        seen.append(path)
+        with open(path, "wb") as file:
+            file.write(data[:len(data) // 2])
+        raise exc
+
+    monkeypatch.setattr(output, "_write_bytes", write_half)
+    with pytest.raises(raised) as info:
+        output.write_png(target, np.ones((8, 8, 3)))
+    if raised is OutputError:
+        assert "No space left" in str(info.value)
+        assert str(target) in str(info.value)
+    assert seen and os.path.basename(seen[0]).startswith(".out.png.")
+    assert _listdir(tmp_path) == ["out.png"]
+    assert target.read_bytes() == b"old png"
+
+
+@pytest.mark.parametrize("name", ["out.exr", "out.png"])
+def test_successful_write_replaces_target(tmp_path, name):
+    target = tmp_path / name
+    target.write_bytes(b"old")
+    old_umask = os.umask(0o027)
+    try:
+        output.write_image(target, np.full((3, 2, 3), 0.25))
+    finally:
+        os.umask(old_umask)
+    assert _listdir(tmp_path) == [name]
+    assert target.read_bytes() != b"old"
+    assert (target.stat().st_mode & 0o777) == 0o640   # not mkstemp's 0o600
+
+
+def test_write_image_dispatch(tmp_path):
+    image = np.full((2, 2, 3), 0.5, np.float32)
+    output.write_image(tmp_path / "a.exr", image, metadata={"x": "y"})
+    output.write_image(tmp_path / "b.PNG", image, exposure=1.0)
+    output.write_image(str(tmp_path / "c.png"), image)
+    assert np.array_equal(output.read_exr(tmp_path / "a.exr"), image)
+    assert (output.read_png(tmp_path / "b.PNG") == 255).all()
+    assert (output.read_png(tmp_path / "c.png") == 188).all()
+
+
+# --------------------------------------------------------------------------
+# Path errors
+# --------------------------------------------------------------------------
+
+def _assert_output_error(call, path, reason):
+    with pytest.raises(OutputError) as info:
+        call()
+    message = str(info.value)
+    assert isinstance(info.value, RaysortError)
+    assert str(path) in message and reason in message
+    assert "\n" not in message
+    return message
+
+
+WRITERS = [output.write_exr, output.write_png, output.write_image]
+
+
+@pytest.mark.parametrize("ext", [".exr", ".png"])
+def test_missing_directory(tmp_path, ext):
+    path = tmp_path / "nope" / "deeper" / ("x" + ext)
+    image = np.zeros((1, 1, 3))
+    for call in (lambda: output.check_writable(path),
+                 lambda: output.write_image(path, image),
+                 lambda: (output.write_exr if ext == ".exr"
+                          else output.write_png)(path, image)):
+        message = _assert_output_error(call, path, "does not exist")
+        assert repr(str(path.parent)) in message
+    assert _listdir(tmp_path) == []
+
+
+def test_missing_relative_directory(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    message = _assert_output_error(
+        lambda: output.write_png("out/x.png", np.zeros((1, 1, 3))),
+        "out/x.png", "does not exist")
+    assert message == ("cannot write 'out/x.png': "
+                       "directory 'out' does not exist")
+
+
+@pytest.mark.parametrize("ext", [".exr", ".png"])
+def test_path_under_regular_file(tmp_path, ext):
+    afile = tmp_path / "afile"
+    afile.write_bytes(b"data")
+    for path in (afile / ("x" + ext), afile / "sub" / ("x" + ext)):
+        _assert_output_error(lambda: output.check_writable(path), path,
+                             f"{str(afile)!r} is not a directory")
+        _assert_output_error(lambda: output.write_image(path, np.zeros((1, 1, 3))),
+                             path, "is not a directory")
+    assert _listdir(tmp_path) == ["afile"]
+    assert afile.read_bytes() == b"data"
+
+
+def test_path_is_directory(tmp_path):
+    path = tmp_path / "dir.exr"
+    path.mkdir()
+    _assert_output_error(lambda: output.check_writable(path), path,
+                         "is a directory")
+    _assert_output_error(lambda: output.write_exr(path, np.zeros((1, 1, 3))),
+                         path, "is a directory")
+    assert _listdir(tmp_path) == ["dir.exr"] and _listdir(path) == []
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0,
+                    reason="root can write to read-only directories")
+def test_read_only_directory(tmp_path):
+    directory = tmp_path / "ro"
+    directory.mkdir()
+    directory.chmod(0o555)
+    try:
+        path = directory / "x.png"
+        _assert_output_error(lambda: output.check_writable(path), path,
+                             "is not writable")
+        _assert_output_error(lambda: output.write_png(path, np.zeros((1, 1, 3))),
+                             path, "is not writable")
+        assert _listdir(directory) == []
+    finally:
+        directory.chmod(0o755)
+
+
+def test_not_writable_directory_reported(tmp_path, monkeypatch):
+    # Works as root too: pretend the kernel denies write access to `ro`.
+    directory = tmp_path / "ro"
+    directory.mkdir()
+    real_access = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode, **kw: (
+        False if os.fspath(p) == str(directory) else real_access(p, mode, **kw)))
+    path = directory / "x.exr"
+    message = _assert_output_error(lambda: output.check_writable(path), path,
+                                   "is not writable")
+    assert message == (f"cannot write {str(path)!r}: "
+                       f"directory {str(directory)!r} is not writable")
+    _assert_output_error(lambda: output.write_exr(path, np.zeros((1, 1, 3))),
+                         path, "is not writable")
+    assert _listdir(directory) == []
+
+
+def test_unsupported_suffix(tmp_path):
+    for name in ("x.jpg", "x", "x.exr.bak"):
+        path = tmp_path / name
+        message = _assert_output_error(
+            lambda: output.write_image(path, np.zeros((1, 1, 3))), path,
+            "unsupported")
+        assert ".exr" in message and ".png" in message
+    assert _listdir(tmp_path) == []
+
+
+def test_check_writable_creates_nothing(tmp_path):
+    output.check_writable(tmp_path / "new.exr")
+    output.check_writable(str(tmp_path / "new.png"))
+    existing = tmp_path / "old.png"
+    existing.write_bytes(b"keep")
+    output.check_writable(existing)
+    with pytest.raises(OutputError):
+        output.check_writable(tmp_path / "a" / "b" / "c.exr")
+    assert _listdir(tmp_path) == ["old.png"]
+    assert existing.read_bytes() == b"keep"
+
+
+def test_empty_path():
+    with pytest.raises(OutputError, match="empty"):
+        output.check_writable("")
