@@ -116,9 +116,35 @@ class Traversal(Plugin):
 
 
 class Shader(Plugin):
-    """Turns hits into radiance and the next bounce's rays; see raysort.shaders.lambert."""
+    """Turns hits into radiance and the next bounce's rays.
+
+    It sees rays and hits in the order the generator made them (the framework
+    scatters hits back), so no sorter can change the image.  ``shade`` may be
+    called from several threads at once for different tiles.
+    """
 
     kind = "shaders"
+
+    def prepare(self, scene):
+        """Precompute per-scene data once before a render (optional)."""
+
+    def shade(self, scene, rays, hits, paths, depth, seed, radiance):
+        """Add the radiance found at ``depth`` and return the next bounce.
+
+        Parameters
+        ----------
+        scene : raysort.scene.Scene
+        rays : raysort.rays.RayBatch;  hits : raysort.rays.Hits (same order)
+        paths : raysort.paths.Paths (same order)
+        depth : int, 0 for primary rays
+        seed : int
+        radiance : float64 (pixels, 3) accumulator of the tile, indexed by ``paths.slot``
+
+        Returns
+        -------
+        raysort.paths.Bounce
+        """
+        raise NotImplementedError
 
 
 KINDS = {cls.kind: cls for cls in (Generator, Sorter, Traversal, Shader)}

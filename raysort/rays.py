@@ -106,6 +106,15 @@ class RayBatch:
     def tmax(self):
         return self.data[7, :self.n]
 
+    def truncate(self, n):
+        """Keep the first ``n`` rays (in place; the rest become inactive padding); returns self."""
+        if not 0 <= n <= self.n:
+            raise ValueError(f"cannot truncate {self.n} rays to {n}")
+        self.data[6, n:] = np.inf
+        self.data[7, n:] = -np.inf
+        self.n = int(n)
+        return self
+
     def take(self, index):
         """A new batch holding the rays ``index`` (an integer array), in that order."""
         index = np.asarray(index, dtype=np.intp)

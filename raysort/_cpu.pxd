@@ -1,0 +1,2 @@
+# cython: language_level=3
+"""CPU feature detection; see _cpu.pyx."""

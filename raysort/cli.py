@@ -1,0 +1,241 @@
+"""The ``raysort`` command: render, bench, plugins, scenes.
+
+Errors a user can cause (bad scene, unknown plugin, unwritable output, ...)
+are printed as one line ``raysort: error: ...`` with exit status 2, never as a
+traceback; output files are written whole or not at all.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+from raysort.errors import ConfigError, RaysortError
+
+__all__ = ["main"]
+
+
+def _size(text):
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 320x240, got {text!r}")
+    if w < 1 or h < 1 or w * h > 64 * 1024 * 1024:
+        raise argparse.ArgumentTypeError(f"image size {text!r} is out of range")
+    return w, h
+
+
+def _positive(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}")
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a number >= 1, got {value}")
+    return value
+
+
+def _non_negative(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}")
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {value}")
+    return value
+
+
+class Progress:
+    """A progress bar on stderr: redrawn in place on a terminal, a few lines otherwise."""
+
+    def __init__(self, label, stream=sys.stderr, enabled=True):
+        self.label, self.stream, self.enabled = label, stream, enabled
+        self.tty = enabled and hasattr(stream, "isatty") and stream.isatty()
+        self.start = time.perf_counter()
+        self.last_decile = -1
+
+    def __call__(self, done, total):
+        if not self.enabled or total <= 0:
+            return
+        frac = done / total
+        elapsed = time.perf_counter() - self.start
+        width = 30
+        bar = "#" * int(frac * width) + "-" * (width - int(frac * width))
+        line = f"{self.label} [{bar}] {done}/{total} {elapsed:6.1f}s"
+        if self.tty:
+            self.stream.write("\r" + line + ("\n" if done == total else ""))
+        elif int(frac * 10) > self.last_decile:
+            self.last_decile = int(frac * 10)
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+
+# --------------------------------------------------------------------------
+# render
+# --------------------------------------------------------------------------
+
+def _shader_config(args):
+    from raysort.registry import parse_spec
+
+    config = parse_spec(args.shader)
+    if args.depth is not None:
+        config["max_depth"] = args.depth
+    if args.shadow_rays is not None:
+        config["shadow_rays"] = args.shadow_rays == "on"
+    return config
+
+
+def _print_summary(result, out, stats_table, stream=sys.stdout):
+    from raysort.stats import COUNTER_LABELS
+
+    st, s = result.stats, result.settings
+    print(f"rendered {s['scene']} {s['width']}x{s['height']}, {s['spp']} spp with "
+          f"{s['sorter']} + {s['traversal']} in {st.wall_seconds:.2f} s "
+          f"({st.threads} thread{'s' if st.threads > 1 else ''})", file=stream)
+    per_depth = "  ".join(f"depth {d}: {n:,}" for d, n in sorted(st.rays.items()))
+    print(f"  rays: {per_depth}  shadow: {st.shadow_rays:,}  total: {st.total_rays:,}",
+          file=stream)
+    print(f"  throughput: {st.mrays_per_second:.3f} Mrays/s", file=stream)
+    stages = "  ".join(f"{k} {v:.2f}" for k, v in st.stage_seconds.items() if v > 0)
+    print(f"  stage seconds (summed over threads): {stages}", file=stream)
+    if stats_table:
+        total = st.closest_hit_counters()
+        if not total.available:
+            print("  counters: not available for this traversal", file=stream)
+        else:
+            print("  work per ray (Table I):", file=stream)
+            header = "    " + "depth".ljust(8) + "".join(f"{v:>12}" for v in
+                                                         COUNTER_LABELS.values())
+            print(header, file=stream)
+            rows = [(str(d), c) for d, c in sorted(st.counters.items())] + [("all", total)]
+            if st.shadow_rays:
+                rows.append(("shadow", st.shadow_counters))
+            for label, c in rows:
+                per = c.per_ray()
+                print("    " + label.ljust(8) + "".join(f"{per[k]:12.2f}" for k in
+                                                        COUNTER_LABELS), file=stream)
+    if out:
+        print(f"  wrote {out} and {os.path.splitext(out)[0] + '.png'}", file=stream)
+
+
+def cmd_render(args):
+    from raysort import output
+    from raysort.pipeline import Pipeline
+
+    out = args.output
+    if not out.lower().endswith(".exr"):
+        raise ConfigError(f"the output must be an .exr file (a .png preview is written next "
+                          f"to it), got {out!r}")
+    output.check_writable(out)
+    output.check_writable(os.path.splitext(out)[0] + ".png")
+    pipe = Pipeline(args.scene, generator=args.generator, sorter=args.sorter,
+                    traversal=args.traversal, shader=_shader_config(args), tile=args.tile,
+                    threads=args.threads)
+    width, height = args.size
+    progress = Progress(f"render {pipe.scene.name}", enabled=not args.quiet)
+    result = pipe.render(width, height, args.spp, args.seed, progress=progress)
+    result.write(out, exposure=args.exposure)
+    if args.json:
+        _write_json(args.json, {"settings": result.settings, "stats": result.stats.as_dict()})
+    _print_summary(result, out, args.stats)
+    return 0
+
+
+def _write_json(path, data):
+    import json
+
+    from raysort.output import _atomic_target
+
+    with _atomic_target(path) as tmp:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            json.dump(data, fh, indent=2, default=str)
+            fh.write("\n")
+
+
+# --------------------------------------------------------------------------
+# plugins, scenes
+# --------------------------------------------------------------------------
+
+def cmd_plugins(args):
+    from raysort import cpu
+    from raysort.registry import list_plugins
+
+    infos = list_plugins(load=True)
+    rows = [("kind", "name", "distribution", "version", "status")]
+    rows += [(i.kind, i.name, i.distribution, i.version, i.status) for i in infos]
+    widths = [max(len(r[k]) for r in rows) for k in range(4)]
+    for r in rows:
+        print("  ".join(c.ljust(w) for c, w in zip(r, widths)) + "  " + r[4])
+    simd = cpu.info()
+    print(f"\nSIMD: compiled {simd['compiled']}, active {simd['active']}; CPU "
+          f"({simd['machine']}) supports: {', '.join(simd['cpu_features']) or 'none detected'}")
+    return 0
+
+
+def cmd_scenes(args):
+    from raysort.scene import scene_names
+
+    for name in scene_names():
+        print(name)
+    return 0
+
+
+# --------------------------------------------------------------------------
+
+def build_parser():
+    parser = argparse.ArgumentParser(
+        prog="raysort", description="Ray sorting for fast incoherent packet ray tracing.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("render", help="render a scene to OpenEXR (+ PNG preview)",
+                       description="Render a scene (a packaged name, a .toml scene file or a "
+                                   "mesh file; default: the Sibenik nave).")
+    r.add_argument("scene", nargs="?", default=None, help="scene name or file (default sibenik)")
+    r.add_argument("--size", type=_size, default=(320, 240), help="WIDTHxHEIGHT (320x240)")
+    r.add_argument("--spp", type=_positive, default=4, help="samples per pixel (4)")
+    r.add_argument("--depth", type=_non_negative, default=None,
+                   help="diffuse bounces after the primary hit (shader default: 2)")
+    r.add_argument("--seed", type=_non_negative, default=0, help="random seed (0)")
+    r.add_argument("--sorter", default="none", help="sorter name or name:key=value,... (none)")
+    r.add_argument("--traversal", default="single", help="traversal name or spec (single)")
+    r.add_argument("--generator", default="pinhole", help="generator name or spec (pinhole)")
+    r.add_argument("--shader", default="lambert", help="shader name or spec (lambert)")
+    r.add_argument("--shadow-rays", choices=("on", "off"), default=None,
+                   help="shadow rays to the scene's point lights (default: on if it has any)")
+    r.add_argument("--threads", type=_positive, default=1, help="worker threads (1)")
+    r.add_argument("--tile", type=_positive, default=32, help="tile edge in pixels (32)")
+    r.add_argument("--exposure", type=float, default=0.0, help="PNG exposure in stops (0)")
+    r.add_argument("-o", "--output", default="render.exr", help="output .exr (render.exr)")
+    r.add_argument("--stats", action="store_true", help="print the Table I counters")
+    r.add_argument("--json", default=None, help="also write settings and stats as JSON")
+    r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    r.set_defaults(func=cmd_render)
+
+    p = sub.add_parser("plugins", help="list every plugin and the SIMD path")
+    p.set_defaults(func=cmd_plugins)
+
+    s = sub.add_parser("scenes", help="list the packaged scenes")
+    s.set_defaults(func=cmd_scenes)
+
+    return parser
+
+
+def main(argv=None):
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except RaysortError as exc:
+        print(f"raysort: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("raysort: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # e.g. piped into head: stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,358 @@
+"""The render pipeline: generate -> sort -> gather -> traverse -> scatter -> shade.
+
+A :class:`Pipeline` is composed from four plugins chosen by name or dict
+config.  :meth:`Pipeline.trace` runs the middle of the frame on any ray batch
+(useful on its own for benchmarks); :meth:`Pipeline.render` renders an image
+in tiles.
+
+How a render is organised (and why it is deterministic):
+
+* The image is cut into square tiles (``tile`` = 32: 32x32 pixels).  One
+  sample pass over a tile is one *large packet* of up to 1024 rays, made in
+  Morton order so that any power-of-4 run of rays is a square of pixels.
+* A tile's passes are processed in batches of about ``batch_rays`` rays; each
+  batch goes through every bounce before the next batch starts, so memory is
+  bounded by the batch, never by image size x spp.
+* Tiles are spread over ``threads`` worker threads; all kernels release the
+  GIL.  A tile accumulates its radiance in its own buffer in a fixed order
+  (batch, bounce, ray index), and hits are scattered back to generation
+  order before shading, so the image is bit-identical for every sorter,
+  traversal and thread count at a fixed seed.
+"""
+from __future__ import annotations
+
+import os
+import time
+from collections import defaultdict
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from raysort import registry
+from raysort.contract import check_sort
+from raysort.errors import ConfigError, PluginContractError
+from raysort.paths import Bounce, Paths
+from raysort.rays import RayBatch, gather, scatter, scatter_occluded
+from raysort.scene import Scene, load_scene
+from raysort.stats import Counters
+
+__all__ = ["Pipeline", "RenderResult", "RenderStats", "STAGES", "morton_order"]
+
+#: stage names used in timings, in pipeline order
+STAGES = ("generate", "sort", "check", "gather", "traverse", "scatter", "shade")
+
+
+def morton_order(width, height):
+    """Local pixel indices ``y * width + x`` of a tile, in Morton (Z) order."""
+    y, x = np.divmod(np.arange(width * height, dtype=np.int64), width)
+    code = np.zeros_like(x)
+    for bit in range(7):
+        code |= ((x >> bit) & 1) << (2 * bit) | ((y >> bit) & 1) << (2 * bit + 1)
+    return np.argsort(code, kind="stable").astype(np.int32)
+
+
+@dataclass
+class RenderStats:
+    """Where the time went and how much work the traversal did.
+
+    ``stage_seconds`` are summed over worker threads (CPU seconds per stage);
+    ``wall_seconds`` is the elapsed time of the whole render.
+    """
+
+    wall_seconds: float = 0.0
+    stage_seconds: dict = field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))
+    rays: dict = field(default_factory=dict)          # depth -> closest-hit rays traced
+    counters: dict = field(default_factory=dict)      # depth -> Counters
+    shadow_rays: int = 0
+    shadow_counters: Counters = field(default_factory=Counters)
+    threads: int = 1
+
+    def merge(self, other):
+        for k, v in other.stage_seconds.items():
+            self.stage_seconds[k] = self.stage_seconds.get(k, 0.0) + v
+        for d, n in other.rays.items():
+            self.rays[d] = self.rays.get(d, 0) + n
+        for d, c in other.counters.items():
+            self.counters[d] = self.counters.get(d, Counters()) + c
+        self.shadow_rays += other.shadow_rays
+        self.shadow_counters = self.shadow_counters + other.shadow_counters
+
+    @property
+    def total_rays(self):
+        """Every ray traced: closest-hit rays of all depths plus shadow rays."""
+        return sum(self.rays.values()) + self.shadow_rays
+
+    @property
+    def mrays_per_second(self):
+        return self.total_rays / max(self.wall_seconds, 1e-12) / 1e6
+
+    def closest_hit_counters(self):
+        """Counters summed over all depths (the paper's per-frame Table I figures)."""
+        total = Counters()
+        for c in self.counters.values():
+            total = total + c
+        return total
+
+    def as_dict(self):
+        return {
+            "wall_seconds": self.wall_seconds,
+            "stage_seconds": dict(self.stage_seconds),
+            "rays_per_depth": {str(d): n for d, n in sorted(self.rays.items())},
+            "shadow_rays": self.shadow_rays,
+            "mrays_per_second": self.mrays_per_second,
+            "counters_per_depth": {str(d): c.as_dict() for d, c in sorted(self.counters.items())},
+            "counters": self.closest_hit_counters().as_dict(),
+            "counters_per_ray": self.closest_hit_counters().per_ray(),
+            "shadow_counters": self.shadow_counters.as_dict(),
+            "threads": self.threads,
+        }
+
+
+@dataclass
+class RenderResult:
+    """A rendered image (float32 linear RGB, (height, width, 3)) with its stats."""
+
+    image: np.ndarray
+    stats: RenderStats
+    settings: dict
+
+    def write(self, path, *, png=True, exposure=0.0):
+        """Write the EXR (and a PNG preview next to it); each file appears whole or not at all."""
+        from raysort import output
+
+        path = os.fspath(path)
+        meta = {f"raysort.{k}": str(v) for k, v in self.settings.items()}
+        output.write_image(path, self.image, **({"metadata": meta} if path.lower().endswith(
+            ".exr") else {"exposure": exposure}))
+        if png and path.lower().endswith(".exr"):
+            output.write_png(os.path.splitext(path)[0] + ".png", self.image, exposure=exposure)
+
+
+class Pipeline:
+    """generate -> sort -> gather -> traverse -> scatter -> shade, with plugins.
+
+    Parameters
+    ----------
+    scene : Scene, or a scene name / path (see :func:`raysort.scene.load_scene`)
+    generator, sorter, traversal, shader : str or dict or plugin instance
+        a plugin name (``"nah"``), a spec (``"none:packet_size=1024"``) or a
+        dict with a ``"type"`` key and parameters.
+    tile : int, default 32
+        tile edge in pixels; one sample pass over a tile is a large packet.
+    threads : int, default 1
+        worker threads (tiles are shared out; the image does not change).
+    batch_rays : int, default 16384
+        about how many rays a worker keeps in flight (memory bound).
+    check_sorters : bool, default True
+        validate every sorter result; False skips the check for built-in
+        sorters marked trusted (third-party sorters are always checked).
+    bvh : dict, optional
+        BVH build parameters (``max_leaf``, ``bins``).
+    """
+
+    def __init__(self, scene=None, *, generator="pinhole", sorter="none", traversal="single",
+                 shader="lambert", tile=32, threads=1, batch_rays=16384, check_sorters=True,
+                 bvh=None):
+        self.scene = scene if isinstance(scene, Scene) else load_scene(scene)
+        self.generator = registry.create("generators", generator)
+        self.sorter = registry.create("sorters", sorter)
+        self.traversal = registry.create("traversals", traversal)
+        self.shader = registry.create("shaders", shader)
+        if not (isinstance(tile, int) and 1 <= tile <= 64):
+            raise ConfigError(f"tile must be an integer in 1..64, got {tile!r}")
+        if not (isinstance(threads, int) and threads >= 1):
+            raise ConfigError(f"threads must be a positive integer, got {threads!r}")
+        if not (isinstance(batch_rays, int) and batch_rays >= 1):
+            raise ConfigError(f"batch_rays must be a positive integer, got {batch_rays!r}")
+        self.tile, self.threads, self.batch_rays = tile, threads, batch_rays
+        self.check_sorters = bool(check_sorters)
+        self.bvh_params = dict(bvh or {})
+        self._bvh = None
+
+    # ------------------------------------------------------------------
+    @property
+    def bvh(self):
+        if self._bvh is None:
+            try:
+                self._bvh = self.scene.bvh(**self.bvh_params)
+            except TypeError as exc:
+                raise ConfigError(f"bvh parameters: {exc}") from None
+        return self._bvh
+
+    def describe(self):
+        """Plugin names and parameters, for reports and file metadata."""
+        return {kind: f"{p.name}{p.params() or ''}" for kind, p in (
+            ("generator", self.generator), ("sorter", self.sorter),
+            ("traversal", self.traversal), ("shader", self.shader))}
+
+    # ------------------------------------------------------------------
+    def trace(self, rays, packets=None, *, any_hit=False, timings=None):
+        """Sort, gather, traverse and scatter one batch of rays.
+
+        Parameters
+        ----------
+        rays : RayBatch
+        packets : int array, optional
+            large-packet boundaries; default: consecutive runs of
+            ``tile * tile`` rays.
+        any_hit : bool
+            occlusion query: return a bool array instead of hits.
+        timings : dict, optional
+            stage name -> seconds, added to.
+
+        Returns
+        -------
+        (Hits or bool array, Counters)
+        """
+        n = len(rays)
+        if packets is None:
+            packets = np.append(np.arange(0, n, self.tile * self.tile), n)
+        packets = np.asarray(packets, dtype=np.int32)
+        clock = _Clock(timings)
+        if n == 0:
+            return (np.zeros(0, bool) if any_hit else scatter(gather(rays, [], [0]), 0)), \
+                Counters()
+        result = self.sorter.sort(rays, packets, self.bvh.bounds)
+        clock.lap("sort")
+        if self.check_sorters or not type(self.sorter).trusted:
+            order, offsets = check_sort(self.sorter.name, result, n, packets)
+            clock.lap("check")
+        else:
+            order, offsets = result
+        batch = gather(rays, order, offsets)
+        clock.lap("gather")
+        counters = self.traversal.intersect(self.bvh, batch, any_hit)
+        clock.lap("traverse")
+        if not isinstance(counters, Counters):
+            raise PluginContractError(
+                f"traversal {self.traversal.name!r} broke its contract: intersect() must "
+                f"return raysort.stats.Counters, got {type(counters).__name__}",
+                kind="traversals", name=self.traversal.name)
+        out = scatter_occluded(batch, n) if any_hit else scatter(batch, n)
+        clock.lap("scatter")
+        return out, counters
+
+    # ------------------------------------------------------------------
+    def render(self, width=256, height=256, spp=4, seed=0, *, progress=None):
+        """Render the scene's camera view; returns a :class:`RenderResult`.
+
+        ``progress(done_tiles, total_tiles)`` is called as tiles finish.
+        """
+        for name, value, lo in (("width", width, 1), ("height", height, 1), ("spp", spp, 1),
+                                ("seed", seed, 0)):
+            if not (isinstance(value, (int, np.integer)) and value >= lo):
+                raise ConfigError(f"{name} must be an integer >= {lo}, got {value!r}")
+        start = time.perf_counter()
+        self.bvh  # build before the workers start
+        self.shader.prepare(self.scene)
+        tiles = [(x, y) for y in range(0, height, self.tile) for x in range(0, width, self.tile)]
+        image = np.zeros((height, width, 3), dtype=np.float32)
+        stats = RenderStats(threads=self.threads)
+
+        def finish(tile, result):
+            radiance, tile_stats = result
+            x0, y0 = tile
+            w, h = min(self.tile, width - x0), min(self.tile, height - y0)
+            image[y0:y0 + h, x0:x0 + w] = (radiance / spp).reshape(h, w, 3).astype(np.float32)
+            stats.merge(tile_stats)
+
+        done = 0
+        if self.threads == 1:
+            for tile in tiles:
+                finish(tile, self._render_tile(tile, width, height, spp, seed))
+                done += 1
+                if progress:
+                    progress(done, len(tiles))
+        else:
+            with ThreadPoolExecutor(max_workers=self.threads) as pool:
+                futures = {pool.submit(self._render_tile, tile, width, height, spp, seed): tile
+                           for tile in tiles}
+                try:
+                    for future in as_completed(futures):
+                        finish(futures[future], future.result())
+                        done += 1
+                        if progress:
+                            progress(done, len(tiles))
+                except BaseException:
+                    for f in futures:
+                        f.cancel()
+                    raise
+        stats.wall_seconds = time.perf_counter() - start
+        settings = dict(self.describe(), scene=self.scene.name, width=width, height=height,
+                        spp=spp, seed=seed, tile=self.tile, threads=self.threads)
+        return RenderResult(image, stats, settings)
+
+    def _render_tile(self, tile, width, height, spp, seed):
+        x0, y0 = tile
+        w, h = min(self.tile, width - x0), min(self.tile, height - y0)
+        local = morton_order(w, h)
+        pixels = ((y0 + local // w) * width + x0 + local % w).astype(np.int32)
+        n_pix = len(pixels)
+        slots = np.zeros(n_pix, dtype=np.int32)
+        slots[:] = local                       # accumulator row = pixel's row-major index
+        radiance = np.zeros((n_pix, 3), dtype=np.float64)
+        stats = RenderStats()
+        clock = _Clock(stats.stage_seconds)
+        per_batch = max(1, self.batch_rays // n_pix)
+        for s0 in range(0, spp, per_batch):
+            samples = np.arange(s0, min(spp, s0 + per_batch), dtype=np.int32)
+            clock.lap(None)
+            rays = self.generator.generate(self.scene.camera, pixels, samples, width, height,
+                                           spp, seed)
+            clock.lap("generate")
+            if not isinstance(rays, RayBatch) or len(rays) != n_pix * len(samples):
+                raise PluginContractError(
+                    f"generator {self.generator.name!r} broke its contract: expected a "
+                    f"RayBatch of {n_pix * len(samples)} rays, got {rays!r}",
+                    kind="generators", name=self.generator.name)
+            paths = Paths(np.tile(pixels, len(samples)), np.repeat(samples, n_pix),
+                          np.tile(slots, len(samples)))
+            packets = np.arange(0, len(rays) + 1, n_pix, dtype=np.int32)
+            depth = 0
+            while len(rays):
+                hits, counters = self.trace(rays, packets, timings=stats.stage_seconds)
+                stats.rays[depth] = stats.rays.get(depth, 0) + len(rays)
+                stats.counters[depth] = stats.counters.get(depth, Counters()) + counters
+                clock.lap(None)
+                bounce = self.shader.shade(self.scene, rays, hits, paths, depth, seed, radiance)
+                clock.lap("shade")
+                if not isinstance(bounce, Bounce):
+                    raise PluginContractError(
+                        f"shader {self.shader.name!r} broke its contract: shade() must return "
+                        f"raysort.paths.Bounce, got {type(bounce).__name__}",
+                        kind="shaders", name=self.shader.name)
+                if bounce.shadow is not None and len(bounce.shadow.rays):
+                    self._trace_shadows(bounce.shadow, packets, radiance, stats)
+                packets = np.searchsorted(bounce.parent, packets).astype(np.int32)
+                paths = paths.take(bounce.parent, bounce.throughput)
+                rays = bounce.rays
+                depth += 1
+        return radiance, stats
+
+    def _trace_shadows(self, shadow, packets, radiance, stats):
+        boundaries = np.searchsorted(shadow.parent, packets).astype(np.int32)
+        occluded, counters = self.trace(shadow.rays, boundaries, any_hit=True,
+                                        timings=stats.stage_seconds)
+        stats.shadow_rays += len(shadow.rays)
+        stats.shadow_counters = stats.shadow_counters + counters
+        clock = _Clock(stats.stage_seconds)
+        visible = ~occluded
+        np.add.at(radiance, shadow.slot[visible], shadow.contribution[:, visible].T)
+        clock.lap("shade")
+
+
+class _Clock:
+    """Adds the time since the last lap to ``timings[stage]``."""
+
+    __slots__ = ("timings", "last")
+
+    def __init__(self, timings):
+        self.timings = timings
+        self.last = time.perf_counter()
+
+    def lap(self, stage):
+        now = time.perf_counter()
+        if stage is not None and self.timings is not None:
+            self.timings[stage] = self.timings.get(stage, 0.0) + now - self.last
+        self.last = now

@@ -1,0 +1,312 @@
+"""Scenes: a triangle mesh with materials, a camera, a sky and lights.
+
+A scene comes from one of three places (see :func:`load_scene`):
+
+* a name of a scene shipped with raysort (``sibenik``, ``sponza``, ``forest``,
+  ``cornell``, ``furnace``, ``plane``; :func:`scene_names` lists them);
+* a scene file (TOML), whose keys are documented in ``scenes/README.md``;
+* any mesh file trimesh reads (PLY, OBJ, STL, GLB, ...), framed by a default
+  camera.
+
+Meshes load with ``process=False``, so vertices and faces stay exactly as
+stored.  Per-face colours (e.g. Sibenik's PLY) become the diffuse albedo.
+Degenerate (zero-area) triangles are kept and never hit.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from raysort import procedural
+from raysort.bvh import BVH
+from raysort.camera import Camera
+from raysort.errors import ConfigError, SceneError
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
+__all__ = ["Scene", "PointLight", "load_scene", "load_mesh", "scene_names"]
+
+DEFAULT_SCENE = "sibenik"
+DEFAULT_ALBEDO = (0.7, 0.7, 0.7)
+
+
+@dataclass(frozen=True)
+class PointLight:
+    """A point light for shadow rays: ``intensity`` in radiant intensity units."""
+
+    position: tuple
+    intensity: tuple
+
+
+@dataclass
+class Scene:
+    """Everything a render needs besides the plugins.
+
+    Attributes
+    ----------
+    vertices : float32 (n, 3);  faces : int32 (m, 3)
+    albedo : float32 (m, 3), diffuse reflectance per face
+    emission : float32 (m, 3), emitted radiance per face (zeros if none)
+    camera : Camera;  sky : float32 (3,), radiance of escaped rays
+    lights : list of PointLight;  name : str;  source : str (where it came from)
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    albedo: np.ndarray
+    emission: np.ndarray
+    camera: Camera
+    sky: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
+    lights: list = field(default_factory=list)
+    name: str = "scene"
+    source: str = ""
+    _bvh: BVH = field(default=None, repr=False)
+
+    def __post_init__(self):
+        self.vertices, self.faces = _checked_geometry(self.vertices, self.faces, self.source
+                                                      or self.name)
+        m = len(self.faces)
+        self.albedo = _per_face("albedo", self.albedo, m, 0.0, 1.0)
+        self.emission = _per_face("emission", self.emission, m, 0.0, np.inf)
+        self.sky = np.asarray(self.sky, dtype=np.float32).reshape(3)
+
+    @classmethod
+    def from_mesh(cls, vertices, faces, *, camera=None, albedo=DEFAULT_ALBEDO, emission=0.0,
+                  sky=(1.0, 1.0, 1.0), lights=(), name="mesh"):
+        """A scene from arrays; the camera defaults to one framing the mesh."""
+        vertices = np.asarray(vertices, dtype=np.float32)
+        if camera is None:
+            camera = Camera.framing(vertices.min(axis=0), vertices.max(axis=0))
+        return cls(vertices, faces, albedo, emission, camera, sky, list(lights), name, name)
+
+    @property
+    def n_triangles(self):
+        return len(self.faces)
+
+    @property
+    def bounds(self):
+        """float32 (2, 3): the box of all vertices used by faces."""
+        used = self.vertices[self.faces.reshape(-1)]
+        return np.stack([used.min(axis=0), used.max(axis=0)]).astype(np.float32)
+
+    def degenerate_faces(self):
+        """Indices of faces with zero area (they are kept and never hit)."""
+        v = self.vertices.astype(np.float64)[self.faces]
+        area2 = np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+        return np.flatnonzero(area2 == 0)
+
+    def bvh(self, *, max_leaf=8, bins=16):
+        """The scene's BVH, built on first use (and rebuilt if the settings change)."""
+        if self._bvh is None or (self._bvh.max_leaf, self._bvh.bins) != (max_leaf, bins):
+            self._bvh = BVH(self.vertices, self.faces, max_leaf=max_leaf, bins=bins)
+        return self._bvh
+
+
+def _checked_geometry(vertices, faces, where):
+    vertices = np.ascontiguousarray(vertices, dtype=np.float32)
+    faces = np.ascontiguousarray(faces, dtype=np.int32)
+    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+        raise SceneError(f"mesh '{where}' has no triangle faces")
+    if vertices.ndim != 2 or vertices.shape[1] != 3:
+        raise SceneError(f"mesh '{where}': vertices have shape {vertices.shape}, not (n, 3)")
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise SceneError(f"mesh '{where}': face indices out of range 0..{len(vertices) - 1}")
+    finite = np.isfinite(vertices).all(axis=1)
+    if not finite.all():
+        bad = np.flatnonzero(~finite)
+        raise SceneError(f"mesh '{where}': {len(bad)} vertices are not finite "
+                         f"(first: vertex {bad[0]} = {vertices[bad[0]].tolist()})")
+    return vertices, faces
+
+
+def _per_face(what, value, m, lo, hi):
+    arr = np.asarray(value, dtype=np.float32)
+    if arr.ndim <= 1:
+        arr = np.broadcast_to(arr.reshape(-1)[:3] if arr.size >= 3 else arr, (m, 3))
+    if arr.shape != (m, 3):
+        raise SceneError(f"{what} must be 3 numbers or one row of 3 per face, got shape "
+                         f"{np.shape(value)}")
+    if not (np.isfinite(arr) | np.isinf(arr)).all() or (arr < lo).any() or (arr > hi).any():
+        raise SceneError(f"{what} values must lie in [{lo}, {hi}]")
+    return np.ascontiguousarray(arr, dtype=np.float32)
+
+
+# --------------------------------------------------------------------------
+# mesh files
+# --------------------------------------------------------------------------
+
+def load_mesh(path):
+    """``(vertices, faces, face_colors)`` of a mesh file; colours are uint8 (m, 3) or None."""
+    import trimesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise SceneError(f"mesh '{path}' does not exist" if not path.exists()
+                         else f"mesh '{path}' is not a file")
+    try:
+        mesh = trimesh.load(str(path), process=False)
+    except Exception as exc:  # trimesh raises many types for corrupt files
+        raise SceneError(f"cannot read mesh '{path}': {exc}") from None
+    if isinstance(mesh, trimesh.Scene):
+        geoms = [g for g in mesh.dump() if isinstance(g, trimesh.Trimesh)]
+        if not geoms:
+            raise SceneError(f"mesh '{path}' has no triangle faces")
+        mesh = trimesh.util.concatenate(geoms) if len(geoms) > 1 else geoms[0]
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise SceneError(f"mesh '{path}' has no triangle faces")
+    colors = None
+    visual = getattr(mesh, "visual", None)
+    if getattr(visual, "kind", None) == "face":
+        colors = np.asarray(visual.face_colors)[:, :3].astype(np.uint8)
+    elif getattr(visual, "kind", None) == "vertex":
+        vc = np.asarray(visual.vertex_colors)[:, :3].astype(np.float64)
+        colors = np.rint(vc[np.asarray(mesh.faces)].mean(axis=1)).astype(np.uint8)
+    vertices, faces = _checked_geometry(mesh.vertices, mesh.faces, path)
+    return vertices, faces, colors
+
+
+# --------------------------------------------------------------------------
+# scene files
+# --------------------------------------------------------------------------
+
+_SCHEMA = {
+    "": {"name", "description", "credits", "mesh", "camera", "material", "emitter", "sky",
+         "light"},
+    "mesh": {"file", "procedural", "params", "face_colors"},
+    "camera": {"eye", "look_at", "up", "vfov"},
+    "material": {"albedo"},
+    "emitter": {"face_color", "radiance"},
+    "sky": {"radiance"},
+    "light": {"position", "intensity"},
+}
+
+
+def _packaged_dir():
+    return resources.files("raysort.scenes")
+
+
+def scene_names():
+    """Names of the scenes shipped with raysort."""
+    return sorted(p.name[:-5] for p in _packaged_dir().iterdir() if p.name.endswith(".toml"))
+
+
+def load_scene(spec=None):
+    """A :class:`Scene` from a packaged name, a ``.toml`` scene file or a mesh file."""
+    spec = DEFAULT_SCENE if spec is None else os.fspath(spec)
+    if not os.path.exists(spec) and spec in scene_names():
+        with resources.as_file(_packaged_dir() / f"{spec}.toml") as path:
+            return _load_scene_file(Path(path))
+    path = Path(spec)
+    if path.suffix.lower() == ".toml":
+        if not path.is_file():
+            raise SceneError(f"scene file '{path}' does not exist")
+        return _load_scene_file(path)
+    if not path.exists() and not path.suffix:
+        raise SceneError(f"unknown scene {spec!r}; packaged scenes: {', '.join(scene_names())}"
+                         f" (or give a .toml scene file or a mesh file)")
+    vertices, faces, colors = load_mesh(path)
+    albedo = colors / 255.0 if colors is not None else DEFAULT_ALBEDO
+    return Scene.from_mesh(vertices, faces, albedo=albedo, name=path.stem)
+
+
+def _check_keys(where, section, table):
+    if not isinstance(table, dict):
+        raise SceneError(f"scene file '{where}': [{section}] must be a table")
+    unknown = sorted(set(table) - _SCHEMA[section])
+    if unknown:
+        prefix = f"{section}." if section else ""
+        raise SceneError(f"scene file '{where}': unknown key '{prefix}{unknown[0]}' (known: "
+                         f"{', '.join(sorted(_SCHEMA[section]))})")
+
+
+def _tables(where, doc, key):
+    value = doc.get(key, [])
+    tables = value if isinstance(value, list) else [value]
+    for t in tables:
+        _check_keys(where, key, t)
+    return tables
+
+
+def _number3(where, key, value):
+    try:
+        arr = np.asarray(value, dtype=np.float64).reshape(3)
+    except (TypeError, ValueError):
+        raise SceneError(f"scene file '{where}': {key} must be 3 numbers, got {value!r}") from None
+    if not np.isfinite(arr).all():
+        raise SceneError(f"scene file '{where}': {key} must be finite, got {value!r}")
+    return arr
+
+
+def _load_scene_file(path):
+    where = path
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise SceneError(f"cannot read scene file '{path}': {exc}") from None
+    _check_keys(where, "", doc)
+    for section in ("mesh", "camera", "material", "sky"):
+        if section in doc:
+            _check_keys(where, section, doc[section])
+    mesh_cfg = doc.get("mesh")
+    if not mesh_cfg or ("file" in mesh_cfg) == ("procedural" in mesh_cfg):
+        raise SceneError(f"scene file '{where}': [mesh] needs exactly one of 'file' or "
+                         f"'procedural'")
+    colors = base_albedo = base_emission = default_camera = None
+    if "file" in mesh_cfg:
+        if "params" in mesh_cfg:
+            raise SceneError(f"scene file '{where}': mesh.params goes with mesh.procedural")
+        vertices, faces, colors = load_mesh(path.parent / mesh_cfg["file"])
+    else:
+        kind = mesh_cfg["procedural"]
+        if kind not in procedural.GENERATORS:
+            raise SceneError(f"scene file '{where}': unknown procedural mesh {kind!r}; known: "
+                             f"{', '.join(sorted(procedural.GENERATORS))}")
+        try:
+            data = procedural.GENERATORS[kind](**mesh_cfg.get("params", {}))
+        except (ConfigError, TypeError) as exc:
+            raise SceneError(f"scene file '{where}': mesh.params: {exc}") from None
+        vertices, faces = data.vertices, data.faces
+        base_albedo, base_emission = data.albedo, data.emission
+        default_camera = procedural.CAMERAS.get(kind)
+
+    material = doc.get("material", {})
+    albedo = _number3(where, "material.albedo", material.get("albedo", DEFAULT_ALBEDO))
+    if base_albedo is not None:
+        albedo = base_albedo
+    elif colors is not None and mesh_cfg.get("face_colors", True):
+        albedo = colors / 255.0
+    emission = np.zeros((len(faces), 3), np.float32)
+    if base_emission is not None:
+        emission[:] = base_emission
+    for em in _tables(where, doc, "emitter"):
+        if colors is None:
+            raise SceneError(f"scene file '{where}': [[emitter]] selects faces by colour but "
+                             f"the mesh has no face colours")
+        match = (colors == _number3(where, "emitter.face_color", em.get("face_color"))
+                 .astype(np.uint8)).all(axis=1)
+        emission[match] = _number3(where, "emitter.radiance", em.get("radiance"))
+
+    cam_cfg = doc.get("camera") or default_camera
+    if cam_cfg is None:
+        camera = Camera.framing(vertices.min(axis=0), vertices.max(axis=0))
+    else:
+        try:
+            camera = Camera(**cam_cfg)
+        except (ConfigError, TypeError) as exc:
+            raise SceneError(f"scene file '{where}': camera: {exc}") from None
+    lights = [PointLight(tuple(_number3(where, "light.position", lt.get("position"))),
+                         tuple(_number3(where, "light.intensity", lt.get("intensity"))))
+              for lt in _tables(where, doc, "light")]
+    sky = _number3(where, "sky.radiance", doc.get("sky", {}).get("radiance", (0, 0, 0)))
+    try:
+        return Scene(vertices, faces, albedo, emission, camera, sky, lights,
+                     doc.get("name", path.stem), str(path))
+    except SceneError as exc:
+        raise SceneError(f"scene file '{where}': {exc}") from None

@@ -1,0 +1,214 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+"""``nah``: the ray sorter of Nah, Jung, Park and Han (section 3 of the paper).
+
+Per large packet, in linear time and touching only ray indices:
+
+1. every ray goes to one of 24 direction buckets (octant x major axis), and
+   each bucket's origin bounding box is grown in the same pass;
+2. each bucket gets an origin grid of 1 to 8 cells: an axis is split in two at
+   the middle of the bucket's origin box when the box is wider on that axis
+   than ``threshold`` (a quarter) of the scene root box;
+3. a counting sort on (bucket, cell) gives the order; every non-empty cell is
+   one sub-packet.
+
+Rays with NaN components land in a defined bucket and cell (comparisons with
+NaN are false), so the sorter never fails on them; the gather marks them
+inactive.
+"""
+from libc.stdint cimport int32_t, uint8_t
+from libc.math cimport INFINITY, fabs
+from raysort._types cimport rs_minf, rs_maxf
+
+import numpy as np
+
+from raysort.errors import ConfigError
+from raysort.plugin import Sorter
+from raysort.rays import MAX_PACKET
+from raysort.sorters.none import fixed_packets
+
+DEF BUCKETS = 24
+DEF KEYS = 24 * 8
+
+
+cdef inline int direction_bucket(float dx, float dy, float dz) noexcept nogil:
+    """octant * 3 + major axis; octant bit k is set when component k is negative."""
+    cdef int octant = (dx < 0) | (dy < 0) << 1 | (dz < 0) << 2
+    cdef float ax = fabs(dx), ay = fabs(dy), az = fabs(dz), best = ax
+    cdef int major = 0
+    if ay > best:
+        major = 1
+        best = ay
+    if az > best:
+        major = 2
+    return octant * 3 + major
+
+
+cdef void split_axes(const float *lo, const float *hi, const float *root_extent,
+                     float threshold, int max_axes, uint8_t *axes, float *mid) noexcept nogil:
+    """Choose the axes a bucket's origin grid splits (bit mask) and where."""
+    cdef int a, b, rank
+    cdef float ext[3]
+    cdef bint wide[3]
+    axes[0] = 0
+    for a in range(3):
+        ext[a] = hi[a] - lo[a]
+        wide[a] = ext[a] > threshold * root_extent[a]
+        mid[a] = 0.5 * lo[a] + 0.5 * hi[a]
+    for a in range(3):
+        if not wide[a]:
+            continue
+        # rank among the wide axes by relative extent (ties: lower axis first)
+        rank = 0
+        for b in range(3):
+            if b != a and wide[b] and (ext[b] * root_extent[a] > ext[a] * root_extent[b]
+                                       or (ext[b] * root_extent[a] == ext[a] * root_extent[b]
+                                           and b < a)):
+                rank += 1
+        if rank < max_axes:
+            axes[0] |= 1 << a
+
+
+cdef inline int grid_cell(const float[:, ::1] rays, int i, uint8_t axes,
+                          const float *mid) noexcept nogil:
+    cdef int a, cell = 0, bit = 0
+    for a in range(3):
+        if axes >> a & 1:
+            if rays[a, i] >= mid[a]:
+                cell |= 1 << bit
+            bit += 1
+    return cell
+
+
+cdef int sort_packet(const float[:, ::1] rays, int start, int end, const float *root_extent,
+                     float threshold, int max_axes, int32_t *order, int32_t *offsets,
+                     uint8_t *key, uint8_t *bucket_out, uint8_t *cell_out) noexcept nogil:
+    """Sort rays [start, end) into order[start:end]; returns the number of sub-packets
+    written to offsets (their start positions)."""
+    cdef float lo[BUCKETS][3]
+    cdef float hi[BUCKETS][3]
+    cdef float mid[BUCKETS][3]
+    cdef uint8_t axes[BUCKETS]
+    cdef int count[KEYS]
+    cdef int i, a, b, k, pos, n_sub = 0
+    for b in range(BUCKETS):
+        for a in range(3):
+            lo[b][a] = INFINITY
+            hi[b][a] = -INFINITY
+    for k in range(KEYS):
+        count[k] = 0
+    # pass 1: direction buckets (indices only) and per-bucket origin bounds
+    for i in range(start, end):
+        b = direction_bucket(rays[3, i], rays[4, i], rays[5, i])
+        key[i - start] = <uint8_t> b
+        for a in range(3):
+            lo[b][a] = rs_minf(rays[a, i], lo[b][a])
+            hi[b][a] = rs_maxf(rays[a, i], hi[b][a])
+    for b in range(BUCKETS):
+        split_axes(lo[b], hi[b], root_extent, threshold, max_axes, &axes[b], mid[b])
+    # pass 2: origin-grid cell, then a counting sort on (bucket, cell)
+    for i in range(start, end):
+        b = key[i - start]
+        k = grid_cell(rays, i, axes[b], mid[b])
+        if bucket_out != NULL:
+            bucket_out[i] = <uint8_t> b
+            cell_out[i] = <uint8_t> k
+        key[i - start] = <uint8_t> (b * 8 + k)
+        count[b * 8 + k] += 1
+    pos = start
+    for k in range(KEYS):
+        if count[k]:
+            offsets[n_sub] = pos
+            n_sub += 1
+        a = count[k]
+        count[k] = pos
+        pos += a
+    for i in range(start, end):
+        k = key[i - start]
+        order[count[k]] = i
+        count[k] += 1
+    return n_sub
+
+
+def _sort(const float[:, ::1] rays, const int32_t[::1] packets, const float[::1] root_extent,
+          float threshold, int max_axes, int32_t[::1] order, int32_t[::1] offsets,
+          uint8_t[::1] bucket_out=None, uint8_t[::1] cell_out=None):
+    """Sort every large packet; returns the number of sub-packets (offsets gets them + end)."""
+    cdef int p, n_sub = 0, widest = 0
+    cdef uint8_t *bucket_ptr = &bucket_out[0] if bucket_out is not None else NULL
+    cdef uint8_t *cell_ptr = &cell_out[0] if cell_out is not None else NULL
+    for p in range(packets.shape[0] - 1):
+        widest = max(widest, packets[p + 1] - packets[p])
+    key = np.empty(max(widest, 1), dtype=np.uint8)
+    cdef uint8_t[::1] key_mv = key
+    with nogil:
+        for p in range(packets.shape[0] - 1):
+            n_sub += sort_packet(rays, packets[p], packets[p + 1], &root_extent[0], threshold,
+                                 max_axes, &order[0], &offsets[n_sub], &key_mv[0],
+                                 bucket_ptr, cell_ptr)
+        offsets[n_sub] = packets[packets.shape[0] - 1]
+    return n_sub
+
+
+class NahSorter(Sorter):
+    """Direction buckets and origin grids (Nah et al.), in Cython.
+
+    Sorts every large packet (by default one 32x32 tile pass, 1024 rays) into
+    coherent sub-packets: 24 direction buckets (octant x major axis), then per
+    bucket an origin grid of 1-8 cells.  Linear time; only indices move.
+
+    ===========  ======  =======  ==========================================
+    parameter    type    default  meaning
+    ===========  ======  =======  ==========================================
+    threshold    float   0.25     split a bucket's origin grid on an axis
+                                  when its origin extent exceeds this
+                                  fraction of the scene box's extent
+    max_cells    int     8        most cells per bucket grid: 1, 2, 4 or 8
+                                  (the widest axes are split first)
+    large_packet int     None     sort within runs of at most this many rays
+                                  of each large packet (None: the whole
+                                  large packet, i.e. the pipeline's tile)
+    ===========  ======  =======  ==========================================
+    """
+
+    trusted = True
+
+    def __init__(self, *, threshold=0.25, max_cells=8, large_packet=None):
+        if not (isinstance(threshold, (int, float)) and not isinstance(threshold, bool)
+                and threshold >= 0):
+            raise ConfigError(f"threshold must be a number >= 0, got {threshold!r}")
+        if max_cells not in (1, 2, 4, 8):
+            raise ConfigError(f"max_cells must be 1, 2, 4 or 8, got {max_cells!r}")
+        if large_packet is not None and not (isinstance(large_packet, int)
+                                             and 1 <= large_packet <= MAX_PACKET):
+            raise ConfigError(f"large_packet must be None or an integer in 1..{MAX_PACKET}, "
+                              f"got {large_packet!r}")
+        self.threshold = float(threshold)
+        self.max_cells = max_cells
+        self.large_packet = large_packet
+
+    def _packets(self, packets):
+        packets = np.ascontiguousarray(packets, dtype=np.int32)
+        if self.large_packet is not None:
+            packets = fixed_packets(packets, self.large_packet)
+        return packets
+
+    def _run(self, rays, packets, bounds, bucket=None, cell=None):
+        packets = self._packets(packets)
+        bounds = np.asarray(bounds, dtype=np.float32)
+        extent = np.ascontiguousarray(bounds[1] - bounds[0], dtype=np.float32)
+        n = len(rays)
+        order = np.empty(max(n, 1), dtype=np.int32)
+        offsets = np.empty(n + 1, dtype=np.int32)
+        n_sub = _sort(rays.data, packets, extent, self.threshold,
+                      self.max_cells.bit_length() - 1, order, offsets, bucket, cell)
+        return order[:n], offsets[:n_sub + 1].copy()
+
+    def sort(self, rays, packets, bounds):
+        return self._run(rays, packets, bounds)
+
+    def classify(self, rays, packets, bounds):
+        """``(bucket, cell)`` of every ray (uint8 arrays), as the sort uses them."""
+        bucket = np.zeros(max(len(rays), 1), dtype=np.uint8)
+        cell = np.zeros(max(len(rays), 1), dtype=np.uint8)
+        self._run(rays, packets, bounds, bucket, cell)
+        return bucket[:len(rays)], cell[:len(rays)]
