@@ -22,7 +22,7 @@ def _flag(name):
 def _compile_args():
     if os.name == "nt":
         return ["/O2", "/fp:precise"]
-    args = ["-O3", "-ffp-contract=off", "-fno-strict-aliasing"]
+    args = ["-O3", "-ffp-contract=off"]
     if platform.machine().lower() in ("x86_64", "amd64") and not _flag("RAYSORT_NO_SIMD"):
         args.append("-msse2")
     return args
@@ -54,5 +54,10 @@ directives = {
     "embedsignature": True,
 }
 
-setup(ext_modules=cythonize(_extensions(), compiler_directives=directives,
-                            include_path=["."], quiet=True))
+JOBS = os.cpu_count() or 1
+
+setup(
+    ext_modules=cythonize(_extensions(), compiler_directives=directives, include_path=["."],
+                          quiet=True, nthreads=JOBS if JOBS > 1 else 0),
+    options={"build_ext": {"parallel": JOBS}},
+)

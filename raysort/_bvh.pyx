@@ -4,9 +4,10 @@
 The tree is binary and stored depth first: an inner node's left child is the
 next node and its right child is ``node.offset``; a leaf holds the triangles
 ``[offset, offset + count)`` of the BVH-ordered triangle array, sorted by their
-input index.  Split costs follow DynBVH (C_trav = C_isec = 1): a node becomes a
-leaf when it holds at most ``max_leaf`` triangles and no binned split is
-cheaper than intersecting them all.
+input index.  Split costs follow DynBVH's SAH with C_isec = 1 and C_trav =
+``trav_cost`` (1 in DynBVH): a node becomes a leaf when it holds at most
+``max_leaf`` triangles and no binned split is cheaper than intersecting them
+all.
 """
 from libc.stdlib cimport malloc, free, qsort
 from libc.stdint cimport int32_t
@@ -61,7 +62,7 @@ cdef inline int bin_of(float c, float cmin, float scale, int bins) noexcept nogi
 
 cdef int find_split(const float *cent, const float *tlo, const float *thi,
                     const int32_t *order, int start, int end, const Box *cbox,
-                    const Box *nbox, int bins, int *axis_out, int *bin_out,
+                    const Box *nbox, int bins, float trav_cost, int *axis_out, int *bin_out,
                     float *cost_out) noexcept nogil:
     """Best binned SAH split over all three axes; returns 0 when none exists."""
     cdef Box bin_box[MAX_BINS]
@@ -102,7 +103,7 @@ cdef int find_split(const float *cent, const float *tlo, const float *thi,
             n_left += bin_count[k]
             if n_left == 0 or right_count[k + 1] == 0:
                 continue
-            cost = 1.0 + (n_left * box_half_area(&acc)
+            cost = trav_cost + (n_left * box_half_area(&acc)
                           + right_count[k + 1] * right_area[k + 1]) / parent_area
             if cost < cost_out[0]:
                 cost_out[0] = cost
@@ -113,8 +114,8 @@ cdef int find_split(const float *cent, const float *tlo, const float *thi,
 
 
 cdef int build_nodes(const float[:, ::1] vertices, const int32_t[:, ::1] faces,
-                     int max_leaf, int bins, rs_node *nodes, int32_t *order,
-                     int *depth) except -1 nogil:
+                     int max_leaf, int bins, float trav_cost, rs_node *nodes,
+                     int32_t *order, int *depth) except -1 nogil:
     """Build into ``nodes`` (room for 2n - 1) and ``order`` (n); returns the node count."""
     cdef int n = faces.shape[0]
     cdef float *tlo = <float *> malloc(3 * n * sizeof(float))
@@ -165,7 +166,8 @@ cdef int build_nodes(const float[:, ::1] vertices, const int32_t[:, ::1] faces,
         count = task.end - task.start
         mid = -1
         if count > 1 and find_split(cent, tlo, thi, order, task.start, task.end,
-                                    &cbox, &nbox, bins, &split_axis, &split_bin, &cost):
+                                    &cbox, &nbox, bins, trav_cost, &split_axis, &split_bin,
+                                    &cost):
             if count > max_leaf or cost < count:
                 # partition by bin, exactly as find_split binned them
                 scale = bins * (1.0 - 1e-6) / (cbox.hi[split_axis] - cbox.lo[split_axis])
@@ -243,6 +245,7 @@ cdef void refit_nodes(rs_node *nodes, int n_nodes, const float[:, ::1] vertices,
 
 
 def build(const float[:, ::1] vertices, const int32_t[:, ::1] faces, int max_leaf, int bins,
+          float trav_cost,
           unsigned char[::1] node_bytes, int32_t[::1] order, unsigned char[::1] tri_bytes):
     """Build a BVH into preallocated buffers; returns (node count, depth)."""
     cdef int n = faces.shape[0], n_nodes, depth = 0
@@ -251,7 +254,8 @@ def build(const float[:, ::1] vertices, const int32_t[:, ::1] faces, int max_lea
     cdef rs_node *nodes = <rs_node *> &node_bytes[0]
     cdef rs_tri *tris = <rs_tri *> &tri_bytes[0]
     with nogil:
-        n_nodes = build_nodes(vertices, faces, max_leaf, bins, nodes, &order[0], &depth)
+        n_nodes = build_nodes(vertices, faces, max_leaf, bins, trav_cost, nodes, &order[0],
+                              &depth)
         prepare_triangles(vertices, faces, &order[0], n, tris)
     return n_nodes, depth
 

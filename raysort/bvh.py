@@ -63,6 +63,9 @@ class BVH:
         a node with more triangles is always split.
     bins : int, default 16
         SAH bins per axis (1..64).
+    traversal_cost : float, default 1.0
+        SAH cost of visiting a node relative to one triangle test (DynBVH: 1);
+        larger values make shallower trees with bigger leaves.
 
     Attributes
     ----------
@@ -71,24 +74,29 @@ class BVH:
     order : int32 array, ``triangles[p]`` is input triangle ``order[p]``
     depth : int, number of levels
     bounds : float32 (2, 3), the root box
+    vertices, faces : the mesh it was built over (vertices move with refit)
     """
 
-    def __init__(self, vertices, faces, *, max_leaf=8, bins=16):
+    def __init__(self, vertices, faces, *, max_leaf=8, bins=16, traversal_cost=1.0):
         if not (isinstance(max_leaf, (int, np.integer)) and 1 <= max_leaf <= 65535):
             raise ConfigError(f"max_leaf must be an integer in 1..65535, got {max_leaf!r}")
         if not (isinstance(bins, (int, np.integer)) and 1 <= bins <= 64):
             raise ConfigError(f"bins must be an integer in 1..64, got {bins!r}")
+        if not (isinstance(traversal_cost, (int, float)) and 0 < traversal_cost <= 1000):
+            raise ConfigError(f"traversal_cost must be a number in (0, 1000], "
+                              f"got {traversal_cost!r}")
         vertices, faces = _check_mesh(vertices, faces)
         self.max_leaf, self.bins = int(max_leaf), int(bins)
+        self.traversal_cost = float(traversal_cost)
         n = len(faces)
         nodes = np.zeros(2 * n, dtype=NODE_DTYPE)
         self.order = np.zeros(n, dtype=np.int32)
         self.triangles = np.zeros(n, dtype=TRI_DTYPE)
         n_nodes, self.depth = _bvh.build(
-            vertices, faces, self.max_leaf, self.bins, nodes.view(np.uint8).reshape(-1),
+            vertices, faces, self.max_leaf, self.bins, self.traversal_cost, nodes.view(np.uint8).reshape(-1),
             self.order, self.triangles.view(np.uint8).reshape(-1))
         self.nodes = nodes[:n_nodes].copy()
-        self._faces = faces
+        self.vertices, self.faces = vertices, faces
 
     @property
     def bounds(self):
@@ -96,18 +104,20 @@ class BVH:
 
     def refit(self, vertices):
         """Move the triangles to new positions of the same vertices and refit the boxes."""
-        vertices, faces = _check_mesh(vertices, self._faces)
+        vertices, faces = _check_mesh(vertices, self.faces)
+        self.vertices = vertices
         _bvh.refit(vertices, faces, self.order, self.nodes.view(np.uint8).reshape(-1),
                    self.triangles.view(np.uint8).reshape(-1))
 
     def stats(self):
-        """Node, leaf and depth figures and the SAH cost (C_trav = C_isec = 1)."""
+        """Node, leaf and depth figures and the SAH cost (with this tree's C_trav)."""
         nodes = self.nodes
         leaf = nodes["count"] > 0
         ext = nodes["hi"] - nodes["lo"]
         area = ext[:, 0] * ext[:, 1] + ext[:, 1] * ext[:, 2] + ext[:, 2] * ext[:, 0]
         root = max(float(area[0]), 1e-30)
-        sah = (area[~leaf].sum() + (area[leaf] * nodes["count"][leaf]).sum()) / root
+        sah = (self.traversal_cost * area[~leaf].sum()
+               + (area[leaf] * nodes["count"][leaf]).sum()) / root
         return {
             "nodes": int(len(nodes)),
             "leaves": int(leaf.sum()),

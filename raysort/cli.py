@@ -218,6 +218,8 @@ def build_parser():
     s = sub.add_parser("scenes", help="list the packaged scenes")
     s.set_defaults(func=cmd_scenes)
 
+    from raysort.bench import add_parser as add_bench_parser
+    add_bench_parser(sub)
     return parser
 
 

@@ -279,8 +279,9 @@ class Pipeline:
                         f.cancel()
                     raise
         stats.wall_seconds = time.perf_counter() - start
+        # what determines the image (not how it was computed: threads live in stats)
         settings = dict(self.describe(), scene=self.scene.name, width=width, height=height,
-                        spp=spp, seed=seed, tile=self.tile, threads=self.threads)
+                        spp=spp, seed=seed, tile=self.tile)
         return RenderResult(image, stats, settings)
 
     def _render_tile(self, tile, width, height, spp, seed):

@@ -110,8 +110,18 @@ class Traversal(Plugin):
     """
 
     kind = "traversals"
+    #: True when hits equal brute force bit for bit (every built-in).  An
+    #: external library with its own triangle test (e.g. Embree) sets False:
+    #: tests then compare its hits within a tolerance, and ``raysort bench``
+    #: does not expect its image to be bit-identical.
+    exact = True
 
     def intersect(self, bvh, packets, any_hit=False):
+        """Trace every sub-packet; write hits into ``packets``; return Counters.
+
+        ``bvh.vertices`` and ``bvh.faces`` give the mesh for traversals that
+        build their own structure (cache it per ``bvh``).
+        """
         raise NotImplementedError
 
 

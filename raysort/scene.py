@@ -68,6 +68,7 @@ class Scene:
     name: str = "scene"
     source: str = ""
     _bvh: BVH = field(default=None, repr=False)
+    _bvh_params: dict = field(default=None, repr=False)
 
     def __post_init__(self):
         self.vertices, self.faces = _checked_geometry(self.vertices, self.faces, self.source
@@ -102,10 +103,12 @@ class Scene:
         area2 = np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
         return np.flatnonzero(area2 == 0)
 
-    def bvh(self, *, max_leaf=8, bins=16):
-        """The scene's BVH, built on first use (and rebuilt if the settings change)."""
-        if self._bvh is None or (self._bvh.max_leaf, self._bvh.bins) != (max_leaf, bins):
-            self._bvh = BVH(self.vertices, self.faces, max_leaf=max_leaf, bins=bins)
+    def bvh(self, **params):
+        """The scene's BVH (see :class:`raysort.bvh.BVH` for ``params``), built on first
+        use and rebuilt when the parameters change."""
+        if self._bvh is None or self._bvh_params != params:
+            self._bvh = BVH(self.vertices, self.faces, **params)
+            self._bvh_params = dict(params)
         return self._bvh
 
 

@@ -8,8 +8,9 @@ Per large packet, in linear time and touching only ray indices:
 2. each bucket gets an origin grid of 1 to 8 cells: an axis is split in two at
    the middle of the bucket's origin box when the box is wider on that axis
    than ``threshold`` (a quarter) of the scene root box;
-3. a counting sort on (bucket, cell) gives the order; every non-empty cell is
-   one sub-packet.
+3. a counting sort on (bucket, cell) gives the order; every non-empty cell
+   becomes sub-packets of at most ``packet_size`` rays (64, Manta's
+   ``RayPacket::MaxSize``, which bounded the paper's sub-packets).
 
 Rays with NaN components land in a defined bucket and cell (comparisons with
 NaN are false), so the sorter never fails on them; the gather marks them
@@ -80,7 +81,8 @@ cdef inline int grid_cell(const float[:, ::1] rays, int i, uint8_t axes,
 
 
 cdef int sort_packet(const float[:, ::1] rays, int start, int end, const float *root_extent,
-                     float threshold, int max_axes, int32_t *order, int32_t *offsets,
+                     float threshold, int max_axes, int packet_size, int32_t *order,
+                     int32_t *offsets,
                      uint8_t *key, uint8_t *bucket_out, uint8_t *cell_out) noexcept nogil:
     """Sort rays [start, end) into order[start:end]; returns the number of sub-packets
     written to offsets (their start positions)."""
@@ -89,7 +91,7 @@ cdef int sort_packet(const float[:, ::1] rays, int start, int end, const float *
     cdef float mid[BUCKETS][3]
     cdef uint8_t axes[BUCKETS]
     cdef int count[KEYS]
-    cdef int i, a, b, k, pos, n_sub = 0
+    cdef int i, a, b, k, pos, piece, n_sub = 0
     for b in range(BUCKETS):
         for a in range(3):
             lo[b][a] = INFINITY
@@ -116,9 +118,11 @@ cdef int sort_packet(const float[:, ::1] rays, int start, int end, const float *
         count[b * 8 + k] += 1
     pos = start
     for k in range(KEYS):
-        if count[k]:
-            offsets[n_sub] = pos
+        piece = 0
+        while piece < count[k]:
+            offsets[n_sub] = pos + piece
             n_sub += 1
+            piece += packet_size
         a = count[k]
         count[k] = pos
         pos += a
@@ -130,7 +134,8 @@ cdef int sort_packet(const float[:, ::1] rays, int start, int end, const float *
 
 
 def _sort(const float[:, ::1] rays, const int32_t[::1] packets, const float[::1] root_extent,
-          float threshold, int max_axes, int32_t[::1] order, int32_t[::1] offsets,
+          float threshold, int max_axes, int packet_size, int32_t[::1] order,
+          int32_t[::1] offsets,
           uint8_t[::1] bucket_out=None, uint8_t[::1] cell_out=None):
     """Sort every large packet; returns the number of sub-packets (offsets gets them + end)."""
     cdef int p, n_sub = 0, widest = 0
@@ -143,7 +148,7 @@ def _sort(const float[:, ::1] rays, const int32_t[::1] packets, const float[::1]
     with nogil:
         for p in range(packets.shape[0] - 1):
             n_sub += sort_packet(rays, packets[p], packets[p + 1], &root_extent[0], threshold,
-                                 max_axes, &order[0], &offsets[n_sub], &key_mv[0],
+                                 max_axes, packet_size, &order[0], &offsets[n_sub], &key_mv[0],
                                  bucket_ptr, cell_ptr)
         offsets[n_sub] = packets[packets.shape[0] - 1]
     return n_sub
@@ -154,7 +159,8 @@ class NahSorter(Sorter):
 
     Sorts every large packet (by default one 32x32 tile pass, 1024 rays) into
     coherent sub-packets: 24 direction buckets (octant x major axis), then per
-    bucket an origin grid of 1-8 cells.  Linear time; only indices move.
+    bucket an origin grid of 1-8 cells, each cell cut into sub-packets of at
+    most ``packet_size`` rays.  Linear time; only indices move.
 
     ===========  ======  =======  ==========================================
     parameter    type    default  meaning
@@ -164,6 +170,8 @@ class NahSorter(Sorter):
                                   fraction of the scene box's extent
     max_cells    int     8        most cells per bucket grid: 1, 2, 4 or 8
                                   (the widest axes are split first)
+    packet_size  int     64       most rays per sub-packet (Manta's
+                                  RayPacket::MaxSize); 4096 = whole cells
     large_packet int     None     sort within runs of at most this many rays
                                   of each large packet (None: the whole
                                   large packet, i.e. the pipeline's tile)
@@ -172,18 +180,22 @@ class NahSorter(Sorter):
 
     trusted = True
 
-    def __init__(self, *, threshold=0.25, max_cells=8, large_packet=None):
+    def __init__(self, *, threshold=0.25, max_cells=8, packet_size=64, large_packet=None):
         if not (isinstance(threshold, (int, float)) and not isinstance(threshold, bool)
                 and threshold >= 0):
             raise ConfigError(f"threshold must be a number >= 0, got {threshold!r}")
         if max_cells not in (1, 2, 4, 8):
             raise ConfigError(f"max_cells must be 1, 2, 4 or 8, got {max_cells!r}")
+        if not (isinstance(packet_size, int) and 1 <= packet_size <= MAX_PACKET):
+            raise ConfigError(f"packet_size must be an integer in 1..{MAX_PACKET}, "
+                              f"got {packet_size!r}")
         if large_packet is not None and not (isinstance(large_packet, int)
                                              and 1 <= large_packet <= MAX_PACKET):
             raise ConfigError(f"large_packet must be None or an integer in 1..{MAX_PACKET}, "
                               f"got {large_packet!r}")
         self.threshold = float(threshold)
         self.max_cells = max_cells
+        self.packet_size = packet_size
         self.large_packet = large_packet
 
     def _packets(self, packets):
@@ -200,7 +212,8 @@ class NahSorter(Sorter):
         order = np.empty(max(n, 1), dtype=np.int32)
         offsets = np.empty(n + 1, dtype=np.int32)
         n_sub = _sort(rays.data, packets, extent, self.threshold,
-                      self.max_cells.bit_length() - 1, order, offsets, bucket, cell)
+                      self.max_cells.bit_length() - 1, self.packet_size, order, offsets,
+                      bucket, cell)
         return order[:n], offsets[:n_sub + 1].copy()
 
     def sort(self, rays, packets, bounds):

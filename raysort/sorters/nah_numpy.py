@@ -22,6 +22,7 @@ class NahNumpySorter(NahSorter):
     ===========  ======  =======  ==========================================
     threshold    float   0.25     as for ``nah``
     max_cells    int     8        as for ``nah``
+    packet_size  int     64       as for ``nah``
     large_packet int     None     as for ``nah``
     ===========  ======  =======  ==========================================
     """
@@ -80,5 +81,9 @@ class NahNumpySorter(NahSorter):
         key = packet * 192 + bucket.astype(np.int64) * 8 + cell
         order = np.argsort(key, kind="stable").astype(np.int32)
         sorted_key = key[order]
-        starts = np.flatnonzero(np.diff(sorted_key, prepend=-1))
+        group_start = np.flatnonzero(np.diff(sorted_key, prepend=-1))
+        # cut each (packet, bucket, cell) group into pieces of packet_size rays
+        rank = np.arange(len(rays)) - np.repeat(group_start, np.diff(
+            np.append(group_start, len(rays))))
+        starts = np.flatnonzero(np.diff(sorted_key, prepend=-1) | (rank % self.packet_size == 0))
         return order, np.append(starts, len(rays)).astype(np.int32)

@@ -1,0 +1,26 @@
+"""Helpers shared by test modules (importable because tests/ is on sys.path)."""
+import numpy as np
+
+from raysort.rays import RayBatch
+
+
+def random_rays(rng, n, bounds, *, spread=1.5):
+    """Rays from random points in (a box ``spread`` times) ``bounds`` toward random directions."""
+    lo, hi = np.asarray(bounds[0], float), np.asarray(bounds[1], float)
+    centre, half = (lo + hi) / 2, (hi - lo) / 2 * spread
+    origins = centre + (rng.random((n, 3)) * 2 - 1) * half
+    directions = rng.normal(size=(n, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    return RayBatch.from_arrays(origins, directions)
+
+
+def assert_same_hits(hits, ref, label=""):
+    """Same prim everywhere; same t bit for bit; same u, v where hit."""
+    bad = np.flatnonzero(hits.prim != ref.prim)
+    assert len(bad) == 0, (f"{label}: {len(bad)} rays hit another primitive, e.g. ray {bad[0]}: "
+                           f"{hits.prim[bad[0]]} (t={hits.t[bad[0]]!r}) vs brute force "
+                           f"{ref.prim[bad[0]]} (t={ref.t[bad[0]]!r})")
+    assert np.array_equal(hits.t.view(np.uint32), ref.t.view(np.uint32)), f"{label}: t differs"
+    hit = ref.prim >= 0
+    assert np.array_equal(hits.u[hit].view(np.uint32), ref.u[hit].view(np.uint32)), label
+    assert np.array_equal(hits.v[hit].view(np.uint32), ref.v[hit].view(np.uint32)), label

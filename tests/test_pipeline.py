@@ -1,0 +1,219 @@
+"""The render pipeline: analytic images, determinism, bounded memory, plugin contracts."""
+import numpy as np
+import pytest
+
+import raysort
+from raysort import output
+from raysort.errors import ConfigError, PluginContractError
+
+
+# --------------------------------------------------------------------------
+# analytic scenes
+# --------------------------------------------------------------------------
+
+@pytest.mark.parametrize("depth", [0, 1, 2, 5])
+def test_furnace_is_exact_without_roulette(depth):
+    """Inside a closed sphere emitting 1 with albedo 0.5, every path collects
+    sum(0.5**k, k=0..depth): cosine sampling of a Lambertian BRDF weights each
+    bounce by exactly the albedo, so every pixel has that value."""
+    pipe = raysort.Pipeline("furnace", shader={"type": "lambert", "max_depth": depth})
+    image = pipe.render(24, 16, spp=2).image
+    expected = sum(0.5 ** k for k in range(depth + 1))
+    np.testing.assert_allclose(image, expected, rtol=1e-6)
+
+
+def test_furnace_with_russian_roulette_is_unbiased():
+    """With Russian roulette paths end at random, but the estimator stays
+    unbiased: the image mean matches the closed form within 5 standard errors."""
+    depth = 6
+    pipe = raysort.Pipeline("furnace", shader={"type": "lambert", "max_depth": depth,
+                                               "russian_roulette": True, "rr_depth": 1})
+    result = pipe.render(32, 32, spp=16, seed=3)
+    pixels = result.image[..., 0].ravel().astype(np.float64)
+    expected = sum(0.5 ** k for k in range(depth + 1))
+    stderr = pixels.std(ddof=1) / np.sqrt(pixels.size)
+    assert stderr > 0, "roulette should make the estimate noisy"
+    assert abs(pixels.mean() - expected) < 5 * stderr
+    # fewer rays than without roulette: paths really end early
+    assert result.stats.rays[depth] < result.stats.rays[0]
+
+
+def test_plane_under_uniform_sky():
+    """A diffuse plane (albedo 0.5) under a sky of radiance 1 reflects exactly 0.5:
+    every bounce ray leaves upward and escapes.  With depth 0 nothing is lit."""
+    lit = raysort.Pipeline("plane").render(20, 20, spp=2).image
+    np.testing.assert_allclose(lit, 0.5, rtol=1e-6)
+    dark = raysort.Pipeline("plane", shader={"type": "lambert", "max_depth": 0}).render(
+        20, 20, spp=1).image
+    assert not dark.any()
+
+
+def test_point_light_on_plane_matches_closed_form():
+    """One bounce-free shadow ray: radiance = albedo/pi * I * cos / r^2 at each hit."""
+    scene = raysort.load_scene("plane")
+    scene.sky[:] = 0
+    scene.lights = [raysort.scene.PointLight((0.0, 1.0, 0.0), (2.0, 2.0, 2.0))]
+    pipe = raysort.Pipeline(scene, shader={"type": "lambert", "max_depth": 0},
+                            generator={"type": "pinhole", "jitter": False})
+    image = pipe.render(9, 9, spp=1).image
+    # recompute the centre pixel's hit point independently
+    eye, fwd, right, up = (v.astype(np.float64) for v in scene.camera.frame(9, 9))
+    d = fwd / np.linalg.norm(fwd)                 # the centre pixel looks along forward
+    t = -eye[1] / d[1]
+    p = eye + t * d
+    to_light = np.array([0.0, 1.0, 0.0]) - p
+    r2 = to_light @ to_light
+    expected = 0.5 / np.pi * 2.0 * (to_light[1] / np.sqrt(r2)) / r2
+    # shadow rays start (1 + max|p|) / 8192 above the surface (lambert's offset),
+    # which moves the light by that much relative to r ~ 1: allow 1e-3
+    np.testing.assert_allclose(image[4, 4], expected, rtol=1e-3)
+
+
+# --------------------------------------------------------------------------
+# determinism: the image cannot depend on sorter, traversal or threads
+# --------------------------------------------------------------------------
+
+def _render(scene, **kw):
+    size = kw.pop("size", (40, 30))
+    spp = kw.pop("spp", 2)
+    seed = kw.pop("seed", 11)
+    return raysort.Pipeline(scene, **kw).render(*size, spp=spp, seed=seed)
+
+
+@pytest.fixture(scope="module")
+def sibenik_reference(sibenik):
+    return _render(sibenik).image
+
+
+@pytest.mark.parametrize("traversal", raysort.available("traversals"))
+@pytest.mark.parametrize("sorter", ["none", "none:packet_size=1024", "nah", "nah_numpy"])
+def test_image_identical_for_every_sorter_and_traversal(sibenik, sibenik_reference,
+                                                         traversal, sorter):
+    image = _render(sibenik, sorter=sorter, traversal=traversal).image
+    assert np.array_equal(image.view(np.uint32), sibenik_reference.view(np.uint32))
+
+
+@pytest.mark.parametrize("traversal", raysort.available("traversals"))
+def test_shadow_rays_identical_for_every_traversal(sibenik, traversal):
+    """Shadow rays use the any-hit path of each traversal."""
+    base = _render(sibenik, shader={"type": "lambert", "shadow_rays": True}, size=(24, 16))
+    other = _render(sibenik, shader={"type": "lambert", "shadow_rays": True}, size=(24, 16),
+                    traversal=traversal, sorter="nah")
+    assert base.stats.shadow_rays > 0
+    assert np.array_equal(base.image.view(np.uint32), other.image.view(np.uint32))
+
+
+def test_thread_count_does_not_change_the_image(sibenik, sibenik_reference):
+    for threads in (2, 3):
+        image = _render(sibenik, threads=threads, traversal="ranged", sorter="nah").image
+        assert np.array_equal(image.view(np.uint32), sibenik_reference.view(np.uint32))
+
+
+def test_same_seed_same_exr_bytes_and_other_seed_differs(sibenik, tmp_path):
+    a, b = tmp_path / "a.exr", tmp_path / "b.exr"
+    _render(sibenik, seed=5).write(a)
+    _render(sibenik, seed=5, threads=2).write(b)
+    assert a.read_bytes() == b.read_bytes()
+    assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
+    other = _render(sibenik, seed=6).image
+    assert not np.array_equal(other, output.read_exr(a))
+
+
+def test_partial_tiles_cover_the_image(sibenik):
+    """An image size that is no multiple of the tile still renders every pixel."""
+    result = _render(sibenik, size=(45, 37), spp=1, tile=16)
+    assert result.image.shape == (37, 45, 3)
+    assert result.stats.rays[0] == 45 * 37
+    assert (result.image.sum(axis=2) > 0).mean() > 0.5
+
+
+# --------------------------------------------------------------------------
+# stats and memory
+# --------------------------------------------------------------------------
+
+def test_stats_account_for_every_ray(sibenik):
+    result = _render(sibenik, traversal="ranged", sorter="nah", size=(32, 32), spp=2)
+    st = result.stats
+    assert st.rays[0] == 32 * 32 * 2
+    assert sorted(st.rays) == [0, 1, 2]
+    for depth, n in st.rays.items():
+        assert st.counters[depth].rays <= n and st.counters[depth].rays > 0.99 * n
+    total = st.closest_hit_counters()
+    assert total.box1 > 0 and total.box4 > 0 and total.ia > 0
+    assert st.total_rays == sum(st.rays.values()) + st.shadow_rays
+    assert st.stage_seconds["traverse"] > 0 and st.wall_seconds > 0
+    assert set(st.as_dict()) >= {"rays_per_depth", "counters_per_ray", "stage_seconds"}
+
+
+def test_memory_is_bounded_by_the_batch(sibenik):
+    """The generator is never asked for more than batch_rays rays at once
+    (rounded up to one whole pass), whatever the image size x spp."""
+    sizes = []
+
+    class Recording(raysort.load("generators", "pinhole")):
+        def generate(self, camera, pixels, samples, width, height, spp, seed):
+            sizes.append(len(pixels) * len(samples))
+            return super().generate(camera, pixels, samples, width, height, spp, seed)
+
+    raysort.register("generators", "recording_test", Recording)
+    try:
+        pipe = raysort.Pipeline(sibenik, generator="recording_test", batch_rays=2048,
+                                shader={"type": "lambert", "max_depth": 0})
+        pipe.render(64, 64, spp=16)
+    finally:
+        raysort.unregister("generators", "recording_test")
+    assert max(sizes) == 2048
+    assert sum(sizes) == 64 * 64 * 16
+
+
+# --------------------------------------------------------------------------
+# bad settings and broken plugins
+# --------------------------------------------------------------------------
+
+@pytest.mark.parametrize("kw", [dict(tile=0), dict(tile=65), dict(threads=0),
+                                dict(batch_rays=0), dict(bvh={"max_leaf": 0})])
+def test_bad_pipeline_settings(kw):
+    with pytest.raises(ConfigError):
+        raysort.Pipeline("plane", **kw).render(4, 4, 1)
+
+
+@pytest.mark.parametrize("kw", [dict(width=0), dict(spp=0), dict(seed=-1), dict(height=2.5)])
+def test_bad_render_settings(kw):
+    args = dict(width=4, height=4, spp=1, seed=0) | kw
+    with pytest.raises(ConfigError):
+        raysort.Pipeline("plane").render(**args)
+
+
+def _with_plugin(kind, name, cls, **pipe_kw):
+    raysort.register(kind, name, cls)
+    try:
+        return raysort.Pipeline("plane", **{kind[:-1]: name}, **pipe_kw).render(8, 8, 1)
+    finally:
+        raysort.unregister(kind, name)
+
+
+def test_traversal_that_returns_no_counters_is_named():
+    class NoCounters(raysort.Traversal):
+        def intersect(self, bvh, packets, any_hit=False):
+            return None
+
+    with pytest.raises(PluginContractError, match="no_counters_test"):
+        _with_plugin("traversals", "no_counters_test", NoCounters)
+
+
+def test_generator_with_wrong_ray_count_is_named():
+    class Short(raysort.Generator):
+        def generate(self, camera, pixels, samples, width, height, spp, seed):
+            return raysort.RayBatch(1)
+
+    with pytest.raises(PluginContractError, match="short_test"):
+        _with_plugin("generators", "short_test", Short)
+
+
+def test_shader_that_returns_garbage_is_named():
+    class Garbage(raysort.Shader):
+        def shade(self, scene, rays, hits, paths, depth, seed, radiance):
+            return "nope"
+
+    with pytest.raises(PluginContractError, match="garbage_test"):
+        _with_plugin("shaders", "garbage_test", Garbage)
