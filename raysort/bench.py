@@ -180,7 +180,8 @@ def _scene_report(scene, results):
 # reporting
 # --------------------------------------------------------------------------
 
-def format_report(report, stream=sys.stdout):
+def format_report(report, stream=None):
+    stream = sys.stdout if stream is None else stream
     s = report["settings"]
     m = report["machine"]
     print(f"raysort bench: {s['width']}x{s['height']}, {s['spp']} spp, depth {s['depth']}, "

@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from raysort import _bvh
-from raysort.errors import ConfigError, SceneError
+from raysort._validate import integer, number
+from raysort.errors import SceneError
 
 __all__ = ["BVH", "NODE_DTYPE", "TRI_DTYPE", "prepare_triangles"]
 
@@ -78,16 +79,10 @@ class BVH:
     """
 
     def __init__(self, vertices, faces, *, max_leaf=8, bins=16, traversal_cost=1.0):
-        if not (isinstance(max_leaf, (int, np.integer)) and 1 <= max_leaf <= 65535):
-            raise ConfigError(f"max_leaf must be an integer in 1..65535, got {max_leaf!r}")
-        if not (isinstance(bins, (int, np.integer)) and 1 <= bins <= 64):
-            raise ConfigError(f"bins must be an integer in 1..64, got {bins!r}")
-        if not (isinstance(traversal_cost, (int, float)) and 0 < traversal_cost <= 1000):
-            raise ConfigError(f"traversal_cost must be a number in (0, 1000], "
-                              f"got {traversal_cost!r}")
+        self.max_leaf = integer("max_leaf", max_leaf, 1, 65535)
+        self.bins = integer("bins", bins, 1, 64)
+        self.traversal_cost = number("traversal_cost", traversal_cost, 0, 1000, lo_open=True)
         vertices, faces = _check_mesh(vertices, faces)
-        self.max_leaf, self.bins = int(max_leaf), int(bins)
-        self.traversal_cost = float(traversal_cost)
         n = len(faces)
         nodes = np.zeros(2 * n, dtype=NODE_DTYPE)
         self.order = np.zeros(n, dtype=np.int32)

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from raysort._validate import number
 from raysort.errors import ConfigError
 
 __all__ = ["Camera"]
@@ -41,8 +42,8 @@ class Camera:
     def __post_init__(self):
         for name in ("eye", "look_at", "up"):
             object.__setattr__(self, name, _vec3(name, getattr(self, name)))
-        if not (isinstance(self.vfov, (int, float)) and 0 < self.vfov < 180):
-            raise ConfigError(f"camera vfov must be in (0, 180) degrees, got {self.vfov!r}")
+        object.__setattr__(self, "vfov", number("camera vfov (degrees)", self.vfov, 0, 180,
+                                                 lo_open=True, hi_open=True))
         forward = np.subtract(self.look_at, self.eye)
         if np.linalg.norm(forward) == 0:
             raise ConfigError("camera eye and look_at must differ")

@@ -49,7 +49,8 @@ def _non_negative(text):
 class Progress:
     """A progress bar on stderr: redrawn in place on a terminal, a few lines otherwise."""
 
-    def __init__(self, label, stream=sys.stderr, enabled=True):
+    def __init__(self, label, stream=None, enabled=True):
+        stream = sys.stderr if stream is None else stream
         self.label, self.stream, self.enabled = label, stream, enabled
         self.tty = enabled and hasattr(stream, "isatty") and stream.isatty()
         self.start = time.perf_counter()
@@ -86,9 +87,10 @@ def _shader_config(args):
     return config
 
 
-def _print_summary(result, out, stats_table, stream=sys.stdout):
+def _print_summary(result, out, stats_table, stream=None):
     from raysort.stats import COUNTER_LABELS
 
+    stream = sys.stdout if stream is None else stream
     st, s = result.stats, result.settings
     print(f"rendered {s['scene']} {s['width']}x{s['height']}, {s['spp']} spp with "
           f"{s['sorter']} + {s['traversal']} in {st.wall_seconds:.2f} s "
@@ -127,8 +129,9 @@ def cmd_render(args):
     if not out.lower().endswith(".exr"):
         raise ConfigError(f"the output must be an .exr file (a .png preview is written next "
                           f"to it), got {out!r}")
-    output.check_writable(out)
-    output.check_writable(os.path.splitext(out)[0] + ".png")
+    for path in (out, os.path.splitext(out)[0] + ".png", args.json):
+        if path:
+            output.check_writable(path)
     pipe = Pipeline(args.scene, generator=args.generator, sorter=args.sorter,
                     traversal=args.traversal, shader=_shader_config(args), tile=args.tile,
                     threads=args.threads)

@@ -22,10 +22,16 @@ def check_sort(name, result, n, packets):
 
     if not (isinstance(result, tuple) and len(result) == 2):
         fail(f"sort() must return (order, offsets), got {type(result).__name__}")
-    order, offsets = (np.asarray(a) for a in result)
+    try:
+        order, offsets = (np.asarray(a) for a in result)
+    except (TypeError, ValueError) as exc:
+        fail(f"order and offsets must be 1-d integer arrays ({exc})")
     for label, arr in (("order", order), ("offsets", offsets)):
         if arr.ndim != 1 or not np.issubdtype(arr.dtype, np.integer):
             fail(f"{label} must be a 1-d integer array, got {arr.dtype} with shape {arr.shape}")
+        if arr.size and arr.max() > np.iinfo(np.int32).max:
+            fail(f"{label} holds values beyond the int32 range")
+    order, offsets = order.astype(np.int64), offsets.astype(np.int64)
     if len(order) != n:
         fail(f"order has {len(order)} entries for {n} rays")
     if n and (order.min() < 0 or order.max() >= n

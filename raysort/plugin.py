@@ -37,6 +37,11 @@ class Plugin:
         """The plugin's parameters and their current values."""
         return {name: getattr(self, name, None) for name in self.parameter_names()}
 
+    def spec(self):
+        """``name:key=value,...``: a spec string that recreates this plugin."""
+        args = ",".join(f"{k}={v!r}" for k, v in self.params().items())
+        return f"{self.name or type(self).__name__}{':' + args if args else ''}"
+
     def __repr__(self):
         args = ", ".join(f"{k}={v!r}" for k, v in self.params().items())
         return f"{type(self).__name__}({args})"
@@ -83,8 +88,9 @@ class Sorter(Plugin):
     """
 
     kind = "sorters"
-    #: set to True only by sorters whose output the framework may trust
-    #: without checking when ``Pipeline(check_sorters=False)``
+    #: raysort's own sorters set this to skip the contract check when
+    #: ``Pipeline(check_sorters=False)``; it is not inherited and has no effect
+    #: on sorters from other packages, which are always checked
     trusted = False
 
     def sort(self, rays, packets, bounds):

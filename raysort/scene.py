@@ -209,7 +209,8 @@ def load_scene(spec=None):
     path = Path(spec)
     if path.suffix.lower() == ".toml":
         if not path.is_file():
-            raise SceneError(f"scene file '{path}' does not exist")
+            raise SceneError(f"scene file '{path}' " + ("is not a file" if path.exists()
+                                                         else "does not exist"))
         return _load_scene_file(path)
     if not path.exists() and not path.suffix:
         raise SceneError(f"unknown scene {spec!r}; packaged scenes: {', '.join(scene_names())}"
@@ -237,6 +238,12 @@ def _tables(where, doc, key):
     return tables
 
 
+def _typed(where, key, value, kind, what):
+    if not isinstance(value, kind) or isinstance(value, bool) and kind is not bool:
+        raise SceneError(f"scene file '{where}': {key} must be {what}, got {value!r}")
+    return value
+
+
 def _number3(where, key, value):
     try:
         arr = np.asarray(value, dtype=np.float64).reshape(3)
@@ -244,6 +251,13 @@ def _number3(where, key, value):
         raise SceneError(f"scene file '{where}': {key} must be 3 numbers, got {value!r}") from None
     if not np.isfinite(arr).all():
         raise SceneError(f"scene file '{where}': {key} must be finite, got {value!r}")
+    return arr
+
+
+def _non_negative3(where, key, value):
+    arr = _number3(where, key, value)
+    if (arr < 0).any():
+        raise SceneError(f"scene file '{where}': {key} must not be negative, got {value!r}")
     return arr
 
 
@@ -261,6 +275,13 @@ def _load_scene_file(path):
     if not mesh_cfg or ("file" in mesh_cfg) == ("procedural" in mesh_cfg):
         raise SceneError(f"scene file '{where}': [mesh] needs exactly one of 'file' or "
                          f"'procedural'")
+    for key, kind, what in (("file", str, "a path"), ("procedural", str, "a name"),
+                            ("params", dict, "a table"), ("face_colors", bool, "true or false")):
+        if key in mesh_cfg:
+            _typed(where, f"mesh.{key}", mesh_cfg[key], kind, what)
+    for key in ("name", "description", "credits"):
+        if key in doc:
+            _typed(where, key, doc[key], str, "a string")
     colors = base_albedo = base_emission = default_camera = None
     if "file" in mesh_cfg:
         if "params" in mesh_cfg:
@@ -292,9 +313,12 @@ def _load_scene_file(path):
         if colors is None:
             raise SceneError(f"scene file '{where}': [[emitter]] selects faces by colour but "
                              f"the mesh has no face colours")
-        match = (colors == _number3(where, "emitter.face_color", em.get("face_color"))
-                 .astype(np.uint8)).all(axis=1)
-        emission[match] = _number3(where, "emitter.radiance", em.get("radiance"))
+        color = _number3(where, "emitter.face_color", em.get("face_color"))
+        if not ((color >= 0) & (color <= 255) & (color == np.round(color))).all():
+            raise SceneError(f"scene file '{where}': emitter.face_color must be 3 integers "
+                             f"in 0..255, got {em.get('face_color')!r}")
+        match = (colors == color.astype(np.uint8)).all(axis=1)
+        emission[match] = _non_negative3(where, "emitter.radiance", em.get("radiance"))
 
     cam_cfg = doc.get("camera") or default_camera
     if cam_cfg is None:
@@ -305,9 +329,9 @@ def _load_scene_file(path):
         except (ConfigError, TypeError) as exc:
             raise SceneError(f"scene file '{where}': camera: {exc}") from None
     lights = [PointLight(tuple(_number3(where, "light.position", lt.get("position"))),
-                         tuple(_number3(where, "light.intensity", lt.get("intensity"))))
+                         tuple(_non_negative3(where, "light.intensity", lt.get("intensity"))))
               for lt in _tables(where, doc, "light")]
-    sky = _number3(where, "sky.radiance", doc.get("sky", {}).get("radiance", (0, 0, 0)))
+    sky = _non_negative3(where, "sky.radiance", doc.get("sky", {}).get("radiance", (0, 0, 0)))
     try:
         return Scene(vertices, faces, albedo, emission, camera, sky, lights,
                      doc.get("name", path.stem), str(path))

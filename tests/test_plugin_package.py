@@ -251,3 +251,19 @@ def test_readme_example_sorter_works(octant_registered, sibenik, workloads, none
     assert not np.array_equal(order, np.arange(n))
     image = _render(sibenik, octant_registered, 48, 32, 2).image
     _assert_bitwise_equal(image, none_image, "octant_example")
+
+
+def test_contract_judges_unsigned_offsets():
+    """What a third-party sorter gets back for unsigned offsets (e.g. a cumsum of
+    uint64 counts): valid ones are accepted like unsigned ``order`` is, and
+    decreasing ones are reported as such, never a raw TypeError or a wrapped size.
+
+    Fails at present: raysort/contract.py line 44 (``reduceat`` with uint64
+    starts) raises TypeError, and line 36 (``np.diff`` of unsigned offsets)
+    wraps, so the message blames a 4294967295-ray sub-packet.
+    """
+    order = np.arange(5, dtype=np.uint64)
+    valid = check_sort("unsigned", (order, np.array([0, 2, 5], np.uint64)), 5, [0, 5])
+    np.testing.assert_array_equal(valid[1], [0, 2, 5])
+    with pytest.raises(raysort.PluginContractError, match="increase strictly"):
+        check_sort("unsigned", (order, np.array([0, 3, 2, 5], np.uint32)), 5, [0, 5])

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from raysort.errors import ConfigError
+from raysort._validate import boolean
 from raysort.plugin import Generator
 from raysort.rays import RayBatch
 
@@ -63,9 +63,7 @@ class PinholeGenerator(Generator):
     """
 
     def __init__(self, *, jitter=True):
-        if not isinstance(jitter, bool):
-            raise ConfigError(f"jitter must be true or false, got {jitter!r}")
-        self.jitter = jitter
+        self.jitter = boolean("jitter", jitter)
 
     def generate(self, camera, pixels, samples, width, height, spp, seed):
         pixels = np.ascontiguousarray(pixels, dtype=np.int32)

@@ -6,7 +6,7 @@ from raysort._rng cimport uniform
 
 import numpy as np
 
-from raysort.errors import ConfigError
+from raysort._validate import boolean, integer
 from raysort.paths import Bounce, ShadowRays
 from raysort.plugin import Shader
 from raysort.rays import RayBatch
@@ -179,16 +179,10 @@ class LambertShader(Shader):
     """
 
     def __init__(self, *, max_depth=2, shadow_rays=None, russian_roulette=False, rr_depth=1):
-        for name, value in (("max_depth", max_depth), ("rr_depth", rr_depth)):
-            if not (isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= 64):
-                raise ConfigError(f"{name} must be an integer in 0..64, got {value!r}")
-        for name, value in (("shadow_rays", shadow_rays), ("russian_roulette", russian_roulette)):
-            if not (isinstance(value, bool) or (name == "shadow_rays" and value is None)):
-                raise ConfigError(f"{name} must be true or false, got {value!r}")
-        self.max_depth = max_depth
-        self.shadow_rays = shadow_rays
-        self.russian_roulette = russian_roulette
-        self.rr_depth = rr_depth
+        self.max_depth = integer("max_depth", max_depth, 0, 64)
+        self.shadow_rays = boolean("shadow_rays", shadow_rays, allow_none=True)
+        self.russian_roulette = boolean("russian_roulette", russian_roulette)
+        self.rr_depth = integer("rr_depth", rr_depth, 0, 64)
         self._prepared = None
 
     def prepare(self, scene):

@@ -22,6 +22,7 @@ from raysort._types cimport rs_minf, rs_maxf
 
 import numpy as np
 
+from raysort._validate import integer, number
 from raysort.errors import ConfigError
 from raysort.plugin import Sorter
 from raysort.rays import MAX_PACKET
@@ -181,22 +182,13 @@ class NahSorter(Sorter):
     trusted = True
 
     def __init__(self, *, threshold=0.25, max_cells=8, packet_size=64, large_packet=None):
-        if not (isinstance(threshold, (int, float)) and not isinstance(threshold, bool)
-                and threshold >= 0):
-            raise ConfigError(f"threshold must be a number >= 0, got {threshold!r}")
-        if max_cells not in (1, 2, 4, 8):
+        self.threshold = number("threshold", threshold, 0)
+        if isinstance(max_cells, bool) or max_cells not in (1, 2, 4, 8):
             raise ConfigError(f"max_cells must be 1, 2, 4 or 8, got {max_cells!r}")
-        if not (isinstance(packet_size, int) and 1 <= packet_size <= MAX_PACKET):
-            raise ConfigError(f"packet_size must be an integer in 1..{MAX_PACKET}, "
-                              f"got {packet_size!r}")
-        if large_packet is not None and not (isinstance(large_packet, int)
-                                             and 1 <= large_packet <= MAX_PACKET):
-            raise ConfigError(f"large_packet must be None or an integer in 1..{MAX_PACKET}, "
-                              f"got {large_packet!r}")
-        self.threshold = float(threshold)
-        self.max_cells = max_cells
-        self.packet_size = packet_size
-        self.large_packet = large_packet
+        self.max_cells = int(max_cells)
+        self.packet_size = integer("packet_size", packet_size, 1, MAX_PACKET)
+        self.large_packet = (None if large_packet is None else
+                             integer("large_packet", large_packet, 1, MAX_PACKET))
 
     def _packets(self, packets):
         packets = np.ascontiguousarray(packets, dtype=np.int32)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from raysort.errors import ConfigError
+from raysort._validate import integer
 from raysort.plugin import Sorter
 from raysort.rays import MAX_PACKET
 
@@ -38,10 +38,7 @@ class NoneSorter(Sorter):
     trusted = True
 
     def __init__(self, *, packet_size=64):
-        if not (isinstance(packet_size, (int, np.integer)) and 1 <= packet_size <= MAX_PACKET):
-            raise ConfigError(f"packet_size must be an integer in 1..{MAX_PACKET}, "
-                              f"got {packet_size!r}")
-        self.packet_size = int(packet_size)
+        self.packet_size = integer("packet_size", packet_size, 1, MAX_PACKET)
 
     def sort(self, rays, packets, bounds):
         order = np.arange(len(rays), dtype=np.int32)

@@ -10,7 +10,7 @@ no call.
 """
 from libc.stdint cimport int32_t, uint8_t
 from raysort._types cimport (rs_node, rs_tri, rs_rays, rs_frustum, rs_counters,
-                             rs_tri1, rs_tri4, rs_active4, rs_minf, rs_maxf)
+                             rs_tri1, rs_tri4, rs_active4, rs_minf, rs_maxf, rs_prefetch)
 
 
 cdef struct Geometry:
@@ -64,6 +64,20 @@ cdef inline int highest_bit(int mask) noexcept nogil:
 cdef inline bint left_first(const rs_node *node, const rs_rays *r, int i) noexcept nogil:
     """Visit the left child first when ray i travels up the node's split axis."""
     return r.d[node.axis][i] >= 0
+
+
+cdef inline int push_children(const Geometry *g, int node, bint left_first_, int32_t *stack,
+                              int sp, int32_t value) noexcept nogil:
+    """Push an inner node's far child, then its near child, as (node, value) pairs on
+    ``stack`` (pairs of ints) at depth ``sp``; prefetch both; return the new depth."""
+    cdef int right = g.nodes[node].offset
+    rs_prefetch(&g.nodes[node + 1])
+    rs_prefetch(&g.nodes[right])
+    stack[2 * sp] = right if left_first_ else node + 1
+    stack[2 * sp + 2] = node + 1 if left_first_ else right
+    stack[2 * sp + 1] = value
+    stack[2 * sp + 3] = value
+    return sp + 2
 
 
 cdef inline void frustum_of(const rs_rays *r, int start, int count, rs_frustum *f) noexcept nogil:

@@ -7,7 +7,8 @@ mask the children inherit, and a node is entered if any lane hits.
 """
 from libc.stdint cimport int32_t, uint8_t
 from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box4, rs_tri4, rs_active4
-from raysort.traversals._common cimport (Geometry, Scratch, run, lowest_bit, left_first)
+from raysort.traversals._common cimport (Geometry, Scratch, run, lowest_bit, left_first,
+                                         push_children)
 
 from raysort.plugin import Traversal
 
@@ -54,15 +55,7 @@ cdef void trace_masked(const Geometry *g, rs_rays *r, int start, int count, int 
         while not mask[j]:
             j += 1
         lane = start + 4 * j + lowest_bit(mask[j])
-        if left_first(n, r, lane):
-            stack[2 * sp] = n.offset
-            stack[2 * sp + 2] = node + 1
-        else:
-            stack[2 * sp] = node + 1
-            stack[2 * sp + 2] = n.offset
-        stack[2 * sp + 1] = level + 1
-        stack[2 * sp + 3] = level + 1
-        sp += 2
+        sp = push_children(g, node, left_first(n, r, lane), stack, sp, level + 1)
 
 
 class MaskedTraversal(Traversal):

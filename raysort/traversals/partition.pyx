@@ -14,7 +14,7 @@ from libc.stdint cimport int32_t
 from raysort._types cimport (rs_node, rs_rays, rs_frustum, rs_counters, rs_box4, rs_tri4,
                              rs_ia_miss, rs_active4)
 from raysort.traversals._common cimport (Geometry, Scratch, run, lowest_bit, left_first,
-                                         frustum_of)
+                                         frustum_of, push_children)
 
 from raysort.plugin import Traversal
 
@@ -67,15 +67,8 @@ cdef void trace_partition(const Geometry *g, rs_rays *r, int start, int count, i
                     rs_tri4(r, ids[j], &g.tris[k], any_hit)
             continue
         m = rs_active4(r, ids[0])
-        if left_first(n, r, ids[0] + (lowest_bit(m) if m else 0)):
-            stack[2 * sp] = n.offset
-            stack[2 * sp + 2] = node + 1
-        else:
-            stack[2 * sp] = node + 1
-            stack[2 * sp + 2] = n.offset
-        stack[2 * sp + 1] = live
-        stack[2 * sp + 3] = live
-        sp += 2
+        sp = push_children(g, node, left_first(n, r, ids[0] + (lowest_bit(m) if m else 0)),
+                           stack, sp, live)
 
 
 class PartitionTraversal(Traversal):

@@ -13,7 +13,7 @@ from raysort._types cimport (rs_node, rs_rays, rs_frustum, rs_counters, rs_box1,
                              rs_ia_miss, rs_active4)
 from raysort.traversals._common cimport (Geometry, Scratch, run, active, align_up,
                                          align_down, lowest_bit, highest_bit, left_first,
-                                         frustum_of, leaf_range)
+                                         frustum_of, leaf_range, push_children)
 
 from raysort.plugin import Traversal
 
@@ -116,15 +116,7 @@ cdef void trace_ranged(const Geometry *g, rs_rays *r, int start, int count, int 
             leaf_range(g, n, r, first, last + 1, any_hit, c)
             continue
         # both children get [first, end); the far one is visited second
-        if left_first(n, r, first):
-            stack[2 * sp] = n.offset
-            stack[2 * sp + 2] = node + 1
-        else:
-            stack[2 * sp] = node + 1
-            stack[2 * sp + 2] = n.offset
-        stack[2 * sp + 1] = first
-        stack[2 * sp + 3] = first
-        sp += 2
+        sp = push_children(g, node, left_first(n, r, first), stack, sp, first)
 
 
 class RangedTraversal(Traversal):

@@ -1,7 +1,7 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """``single``: one ray at a time, the scalar reference traversal."""
 from libc.stdint cimport int32_t
-from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box1, rs_tri1
+from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box1, rs_tri1, rs_prefetch
 from raysort.traversals._common cimport Geometry, Scratch, run, active, left_first
 
 from raysort.plugin import Traversal
@@ -22,6 +22,7 @@ cdef void trace_single(const Geometry *g, rs_rays *r, int start, int count, int 
             c.box1 += 1
             if rs_box1(r, i, n):
                 if n.count == 0:
+                    rs_prefetch(&g.nodes[n.offset])
                     if left_first(n, r, i):
                         stack[sp] = n.offset
                         node = node + 1

@@ -1,0 +1,313 @@
+"""The ``raysort`` command line: renders, listings, and one-line errors that leave no files.
+
+Most tests call ``raysort.cli.main`` in-process; a few run ``python -m raysort``
+in a subprocess to see the real exit status and stderr.
+"""
+import importlib.resources
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import raysort
+from raysort import output
+from raysort.cli import main
+
+BUILTINS = {("generators", "pinhole"), ("sorters", "none"), ("sorters", "nah"),
+            ("sorters", "nah_numpy"), ("traversals", "single"), ("traversals", "masked"),
+            ("traversals", "ranged"), ("traversals", "partition"), ("shaders", "lambert")}
+TABLE_I = ("N_IA", "scalar N_B", "SIMD N_B", "scalar N_T", "SIMD N_T")
+TINY = ["--size", "8x6", "--spp", "1", "-q"]
+
+
+def srgb8(linear):
+    """8-bit sRGB code of a linear value in [0, 1] (IEC 61966-2-1)."""
+    v = 12.92 * linear if linear <= 0.0031308 else 1.055 * linear ** (1 / 2.4) - 0.055
+    return int(np.floor(v * 255 + 0.5))
+
+
+def run(capsys, *argv):
+    """main(argv) -> (exit code, stdout, stderr)."""
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def assert_one_line_error(err, *fragments):
+    """stderr is exactly one 'raysort: error: ...' line (no traceback) containing fragments."""
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("raysort: error: "), err
+    assert "Traceback" not in err
+    for fragment in fragments:
+        assert fragment in lines[0], (fragment, lines[0])
+
+
+def run_module(*argv, cwd):
+    return subprocess.run([sys.executable, "-m", "raysort", *map(str, argv)], cwd=cwd,
+                          capture_output=True, text=True, timeout=300)
+
+
+# --------------------------------------------------------------------------
+# renders
+# --------------------------------------------------------------------------
+
+def test_render_plane_subprocess(tmp_path):
+    """`python -m raysort render plane` exits 0 with a clean stderr, prints the Table I
+    counters, and writes an EXR of exactly albedo * sky = 0.5 plus its PNG preview."""
+    proc = run_module("render", "plane", "--size", "16x12", "--spp", "1", "-o", "x.exr", "-q",
+                      "--stats", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == ""
+    assert sorted(os.listdir(tmp_path)) == ["x.exr", "x.png"]
+    image = output.read_exr(tmp_path / "x.exr")
+    assert image.shape == (12, 16, 3) and image.dtype == np.float32
+    np.testing.assert_allclose(image, 0.5, rtol=1e-6)
+    png = output.read_png(tmp_path / "x.png")
+    assert png.shape == (12, 16, 3)
+    assert (png == srgb8(0.5)).all()
+    # Table I: header, and the plane's BVH is one leaf of 2 triangles that every
+    # primary ray enters: 1 box and 2 triangle tests per primary ray
+    out = proc.stdout
+    header = next(line for line in out.splitlines() if "N_IA" in line)
+    for label in TABLE_I:
+        assert label in header
+    row0 = next(line.split() for line in out.splitlines() if line.split()[:1] == ["0"])
+    assert [float(v) for v in row0[1:]] == [0.0, 1.0, 0.0, 2.0, 0.0]
+    assert "rendered plane 16x12, 1 spp" in out
+
+
+def test_error_subprocess(tmp_path):
+    """A user error exits with status 2 and one stderr line, no traceback, no file."""
+    proc = run_module("render", "nosuchscene", "-o", "x.exr", "-q", cwd=tmp_path)
+    assert proc.returncode == 2
+    assert_one_line_error(proc.stderr, "nosuchscene")
+    assert proc.stdout == "" and os.listdir(tmp_path) == []
+
+
+def test_render_in_process_writes_exr_png_and_json(tmp_path, capsys):
+    """main() renders the plane; --json records the settings and ray counts
+    (192 primary rays, each bounces once off the plane and escapes)."""
+    exr, js = tmp_path / "x.exr", tmp_path / "x.json"
+    code, out, err = run(capsys, "render", "plane", "--size", "16x12", "--spp", "1", "-o", exr,
+                         "-q", "--json", js, "--sorter", "nah", "--traversal", "ranged")
+    assert code == 0 and err == ""
+    np.testing.assert_allclose(output.read_exr(exr), 0.5, rtol=1e-6)
+    assert output.read_png(tmp_path / "x.png").shape == (12, 16, 3)
+    data = json.loads(js.read_text())
+    s = data["settings"]
+    assert (s["scene"], s["width"], s["height"], s["spp"], s["seed"]) == ("plane", 16, 12, 1, 0)
+    assert "nah" in s["sorter"] and "ranged" in s["traversal"]
+    assert data["stats"]["rays_per_depth"] == {"0": 192, "1": 192}
+    assert data["stats"]["counters_per_depth"]["0"]["rays"] == 192
+    assert sorted(os.listdir(tmp_path)) == ["x.exr", "x.json", "x.png"]
+
+
+def test_summary_goes_to_the_current_stdout(tmp_path, capsys):
+    """The render summary and --stats table are printed to sys.stdout as it is when
+    main() runs (so capsys / contextlib.redirect_stdout see them)."""
+    code, out, err = run(capsys, "render", "plane", *TINY, "-o", tmp_path / "x.exr", "--stats")
+    assert code == 0
+    assert "rendered plane 8x6" in out
+    for label in TABLE_I:
+        assert label in out
+
+
+def test_progress_goes_to_the_current_stderr(tmp_path, capsys):
+    """Without -q the progress bar is written to sys.stderr as it is when main() runs."""
+    code, out, err = run(capsys, "render", "plane", "--size", "8x6", "--spp", "1",
+                         "-o", tmp_path / "x.exr")
+    assert code == 0
+    assert "render plane" in err and "Traceback" not in err
+
+
+def test_render_default_scene_is_sibenik(tmp_path, capsys):
+    """`raysort render` with no scene renders the Sibenik nave (one primary ray per pixel
+    at depth 0 and 1 spp)."""
+    exr, js = tmp_path / "s.exr", tmp_path / "s.json"
+    code, out, err = run(capsys, "render", *TINY, "--depth", "0", "-o", exr, "--json", js)
+    assert code == 0, err
+    data = json.loads(js.read_text())
+    assert data["settings"]["scene"] == "sibenik"
+    assert data["stats"]["rays_per_depth"] == {"0": 48}
+    image = output.read_exr(exr)
+    assert image.shape == (6, 8, 3) and np.isfinite(image).all() and (image >= 0).all()
+    assert image.any()
+
+
+def test_render_overwrites_an_existing_output(tmp_path, capsys):
+    """A successful render replaces existing outputs and leaves no temporary files."""
+    exr = tmp_path / "x.exr"
+    exr.write_bytes(b"old")
+    (tmp_path / "x.png").write_bytes(b"old")
+    code, _, _ = run(capsys, "render", "plane", *TINY, "-o", exr)
+    assert code == 0
+    assert output.read_exr(exr).shape == (6, 8, 3)
+    assert output.read_png(tmp_path / "x.png").shape == (6, 8, 3)
+    assert sorted(os.listdir(tmp_path)) == ["x.exr", "x.png"]
+
+
+# --------------------------------------------------------------------------
+# user errors: exit 2, one line, nothing written
+# --------------------------------------------------------------------------
+
+def _prepare(case, tmp_path):
+    """(argv scene + options, expected message fragments) for each bad input."""
+    inputs = tmp_path / "in"
+    inputs.mkdir()
+    if case == "missing-scene-file":
+        return [inputs / "nope.toml"], ["nope.toml"]
+    if case == "unknown-scene":
+        return ["sibenikk"], ["sibenikk", "sibenik", "plane"]
+    if case == "truncated-ply":
+        data = (importlib.resources.files("raysort.scenes") / "sibenik.ply").read_bytes()
+        (inputs / "half.ply").write_bytes(data[:len(data) // 2])
+        return [inputs / "half.ply"], ["half.ply"]
+    if case == "no-faces":
+        (inputs / "points.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
+        return [inputs / "points.obj"], ["points.obj"]
+    if case == "nan-vertices":
+        (inputs / "nan.obj").write_text("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n")
+        return [inputs / "nan.obj"], ["nan.obj", "not finite"]
+    if case == "unknown-sorter":
+        return ["plane", "--sorter", "bogus"], ["bogus", "nah", "nah_numpy", "none"]
+    if case == "unknown-traversal":
+        return ["plane", "--traversal", "singel"], ["singel", "masked", "partition"]
+    if case == "unread-parameter":
+        return ["plane", "--sorter", "none:bogus=1"], ["'none'", "'bogus'", "packet_size"]
+    if case == "bad-spec":
+        return ["plane", "--sorter", "none:packet_size"], ["packet_size", "key=value"]
+    if case == "bad-parameter-value":
+        return ["plane", "--sorter", "none:packet_size=0"], ["packet_size"]
+    if case == "bad-scene-key":
+        (inputs / "s.toml").write_text('bogus = 1\n[mesh]\nprocedural = "plane"\n')
+        return [inputs / "s.toml"], ["s.toml", "bogus"]
+    if case == "bad-scene-value":
+        (inputs / "s.toml").write_text('[mesh]\nprocedural = ["plane"]\n')
+        return [inputs / "s.toml"], ["s.toml", "procedural"]
+    if case == "bad-camera":
+        (inputs / "s.toml").write_text('[mesh]\nprocedural = "plane"\n'
+                                       '[camera]\neye = [0, 0, 0]\nlook_at = [0, 0, 0]\n')
+        return [inputs / "s.toml"], ["s.toml", "look_at"]
+    raise AssertionError(case)
+
+
+SCENE_AND_PLUGIN_ERRORS = ["missing-scene-file", "unknown-scene", "truncated-ply", "no-faces",
+                           "nan-vertices", "unknown-sorter", "unknown-traversal",
+                           "unread-parameter", "bad-spec", "bad-parameter-value",
+                           "bad-scene-key", "bad-scene-value", "bad-camera"]
+
+
+@pytest.mark.parametrize("case", SCENE_AND_PLUGIN_ERRORS)
+def test_bad_input_is_one_line_and_writes_nothing(case, tmp_path, capsys):
+    """Each bad scene or plugin choice: exit 2, one 'raysort: error:' line naming the
+    problem, nothing on stdout, and no .exr, .png, .json or temporary file."""
+    args, fragments = _prepare(case, tmp_path)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    code, out, err = run(capsys, "render", *args, *TINY, "-o", out_dir / "x.exr",
+                         "--json", out_dir / "x.json")
+    assert code == 2
+    assert_one_line_error(err, *fragments)
+    assert out == ""
+    assert os.listdir(out_dir) == []
+
+
+@pytest.mark.parametrize("case", ["missing-directory", "under-a-file", "png-suffix", "no-suffix",
+                                  "is-a-directory", "json-missing-directory"])
+def test_bad_output_path_is_one_line_and_writes_nothing(case, tmp_path, capsys):
+    """Each unusable output path: exit 2, one error line naming it, nothing created
+    (no directory, no image, no temporary file)."""
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    (out_dir / "afile").write_bytes(b"keep")
+    (out_dir / "dir.exr").mkdir()            # a directory whose name ends in .exr
+    extra = []
+    target = {"missing-directory": out_dir / "missing" / "x.exr",
+              "under-a-file": out_dir / "afile" / "x.exr",
+              "png-suffix": out_dir / "x.png",
+              "no-suffix": out_dir / "x",
+              "is-a-directory": out_dir / "dir.exr",
+              "json-missing-directory": out_dir / "x.exr"}[case]
+    if case == "json-missing-directory":
+        extra = ["--json", out_dir / "missing" / "x.json"]
+    before = sorted(os.listdir(out_dir))
+    code, out, err = run(capsys, "render", "plane", *TINY, "-o", target, *extra)
+    assert code == 2
+    name = "missing" if case.endswith("missing-directory") else os.path.basename(target)
+    assert_one_line_error(err, name)
+    assert out == ""
+    assert sorted(os.listdir(out_dir)) == before
+    assert (out_dir / "afile").read_bytes() == b"keep"
+
+
+def test_failed_render_leaves_existing_outputs_untouched(tmp_path, capsys):
+    """When a render fails before writing, existing .exr/.png files keep their bytes
+    and modification times."""
+    exr, png = tmp_path / "x.exr", tmp_path / "x.png"
+    exr.write_bytes(b"precious exr")
+    png.write_bytes(b"precious png")
+    os.utime(exr, ns=(1_000_000_000, 1_000_000_000))
+    os.utime(png, ns=(1_000_000_000, 1_000_000_000))
+    for bad in (["plane", "--sorter", "bogus"], ["nosuchscene"],
+                ["plane", "--sorter", "none:bogus=1"]):
+        code, _, err = run(capsys, "render", *bad, *TINY, "-o", exr)
+        assert code == 2 and err.startswith("raysort: error:")
+        assert exr.read_bytes() == b"precious exr" and png.read_bytes() == b"precious png"
+        assert exr.stat().st_mtime_ns == png.stat().st_mtime_ns == 1_000_000_000
+    assert sorted(os.listdir(tmp_path)) == ["x.exr", "x.png"]
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["render", "--size", "garbage"], "--size"),
+    (["render", "--size", "0x10"], "--size"),
+    (["render", "--size", "10x"], "--size"),
+    (["render", "--spp", "0"], "--spp"),
+    (["render", "--spp", "two"], "--spp"),
+    (["render", "--depth", "-1"], "--depth"),
+    (["render", "--threads", "0"], "--threads"),
+    (["render", "--shadow-rays", "maybe"], "--shadow-rays"),
+    (["frobnicate"], "frobnicate"),
+    ([], "command"),
+])
+def test_argument_errors_exit_2(argv, option, tmp_path, capsys, monkeypatch):
+    """Malformed options are argparse errors: exit status 2, usage on stderr, no file."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert "usage:" in err and option in err and "Traceback" not in err
+    assert os.listdir(tmp_path) == []
+
+
+# --------------------------------------------------------------------------
+# listings
+# --------------------------------------------------------------------------
+
+def test_plugins_lists_every_builtin(capsys):
+    """`raysort plugins` lists each built-in with distribution raysort, status ok,
+    and ends with the SIMD line."""
+    raysort.refresh()
+    code, out, err = run(capsys, "plugins")
+    assert code == 0 and err == ""
+    lines = out.splitlines()
+    assert lines[0].split() == ["kind", "name", "distribution", "version", "status"]
+    rows = {(cols[0], cols[1]): cols for cols in (line.split() for line in lines[1:]) if cols
+            and cols[0] in {"generators", "sorters", "traversals", "shaders"}}
+    assert BUILTINS <= set(rows)
+    for key in BUILTINS:
+        assert rows[key][2] == "raysort" and rows[key][4] == "ok", rows[key]
+    simd = [line for line in lines if line.startswith("SIMD:")]
+    assert len(simd) == 1 and "compiled" in simd[0] and "active" in simd[0]
+
+
+def test_scenes_lists_packaged_scenes(capsys):
+    """`raysort scenes` prints the packaged scene names, one per line."""
+    code, out, err = run(capsys, "scenes")
+    assert code == 0 and err == ""
+    assert out.splitlines() == raysort.scene_names()
+    assert {"sibenik", "sponza", "plane", "furnace", "cornell", "forest"} <= set(out.split())
