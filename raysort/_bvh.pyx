@@ -17,6 +17,10 @@ from raysort._types cimport rs_node, rs_tri, rs_minf, rs_maxf
 import numpy as np
 
 DEF MAX_BINS = 64
+# a triangle whose squared angle sine is at most this is degenerate (never hit)
+DEF DEGENERATE_SIN2 = 9.094947017729282e-13   # 2**-40
+
+DEGENERATE_SINE = 2.0 ** -20
 
 
 cdef struct Box:
@@ -205,14 +209,35 @@ cdef int build_nodes(const float[:, ::1] vertices, const int32_t[:, ::1] faces,
 
 cdef void prepare_triangles(const float[:, ::1] vertices, const int32_t[:, ::1] faces,
                             const int32_t *order, int n, rs_tri *out) noexcept nogil:
-    """Fill ``out[p]`` with triangle ``order[p]`` (or p when order is NULL)."""
+    """Fill ``out[p]`` with triangle ``order[p]`` (or p when order is NULL).
+
+    A degenerate triangle gets zero edges, so its determinant is exactly 0 and
+    it is never hit: one whose area is below float32 precision, i.e.
+    |e1 x e2|^2 <= 2^-40 |e1|^2 |e2|^2 (the sine of its angle is at most
+    2^-20; exactly zero-area triangles included).  For such slivers the
+    Moller-Trumbore determinant is rounding noise and would report hits far
+    from the triangle.  Computed in double from the float32 vertices.
+    """
     cdef int p, f, a
+    cdef double e1[3]
+    cdef double e2[3]
+    cdef double cx, cy, cz
+    cdef bint flat
     for p in range(n):
         f = order[p] if order != NULL else p
         for a in range(3):
+            e1[a] = <double> vertices[faces[f, 1], a] - <double> vertices[faces[f, 0], a]
+            e2[a] = <double> vertices[faces[f, 2], a] - <double> vertices[faces[f, 0], a]
+        cx = e1[1] * e2[2] - e1[2] * e2[1]
+        cy = e1[2] * e2[0] - e1[0] * e2[2]
+        cz = e1[0] * e2[1] - e1[1] * e2[0]
+        flat = (cx * cx + cy * cy + cz * cz <= DEGENERATE_SIN2
+                * (e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2])
+                * (e2[0] * e2[0] + e2[1] * e2[1] + e2[2] * e2[2]))
+        for a in range(3):
             out[p].v0[a] = vertices[faces[f, 0], a]
-            out[p].e1[a] = vertices[faces[f, 1], a] - vertices[faces[f, 0], a]
-            out[p].e2[a] = vertices[faces[f, 2], a] - vertices[faces[f, 0], a]
+            out[p].e1[a] = 0 if flat else vertices[faces[f, 1], a] - vertices[faces[f, 0], a]
+            out[p].e2[a] = 0 if flat else vertices[faces[f, 2], a] - vertices[faces[f, 0], a]
         out[p].id = f
         out[p].pad[0] = 0
         out[p].pad[1] = 0

@@ -8,7 +8,9 @@ Cython kernel itself on small scenes.
 
 Hit rule (all traversals obey it): the closest hit with ``tmin < t < tmax``;
 on equal ``t`` the lower triangle index wins; a ray is invalid (never hits) if
-its origin or direction is not finite or unless ``0 <= tmin < tmax``.
+its origin or direction is not finite or unless ``0 <= tmin < tmax``;
+subnormal direction components count as zero; a degenerate triangle (the sine
+of its angle at most 2^-20, zero area included) is never hit.
 """
 from __future__ import annotations
 
@@ -50,6 +52,7 @@ def brute_force_numpy(vertices, faces, rays):
     v_best = np.zeros(n, dtype=f32)
     o = rays.origins.astype(f32)
     d = rays.directions.astype(f32)
+    d = np.where(np.abs(d) < np.finfo(f32).tiny, np.copysign(f32(0), d), d).astype(f32)
     tmin, tmax = rays.tmin.astype(f32), rays.tmax.astype(f32)
     with np.errstate(all="ignore"):
         valid = (np.isfinite(o).all(0) & np.isfinite(d).all(0) & (tmin >= 0) & (tmin < tmax))

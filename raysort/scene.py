@@ -98,10 +98,17 @@ class Scene:
         return np.stack([used.min(axis=0), used.max(axis=0)]).astype(np.float32)
 
     def degenerate_faces(self):
-        """Indices of faces with zero area (they are kept and never hit)."""
+        """Indices of degenerate faces: kept, but never hit.
+
+        A face is degenerate when the sine of its angle at the first vertex
+        is at most 2^-20 (|e1 x e2|^2 <= 2^-40 |e1|^2 |e2|^2 in double), which
+        includes every face of zero area; see raysort/_bvh.pyx.
+        """
         v = self.vertices.astype(np.float64)[self.faces]
-        area2 = np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
-        return np.flatnonzero(area2 == 0)
+        e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
+        cross = np.cross(e1, e2)
+        return np.flatnonzero((cross * cross).sum(axis=1) <= 2.0 ** -40
+                              * (e1 * e1).sum(axis=1) * (e2 * e2).sum(axis=1))
 
     def bvh(self, **params):
         """The scene's BVH (see :class:`raysort.bvh.BVH` for ``params``), built on first

@@ -28,7 +28,8 @@ def grid(n, plane_axis, level, lo=0.0):
     V[:, a], V[:, b], V[:, plane_axis] = ii.ravel() + lo, jj.ravel() + lo, level
     k = lambda i, j: i * (n + 1) + j  # noqa: E731
     F = [f for i in range(n) for j in range(n)
-         for f in ([k(i, j), k(i + 1, j), k(i + 1, j + 1)], [k(i, j), k(i + 1, j + 1), k(i, j + 1)])]
+         for f in ([k(i, j), k(i + 1, j), k(i + 1, j + 1)],
+                   [k(i, j), k(i + 1, j + 1), k(i, j + 1)])]
     return V, np.array(F, np.int32)
 
 
@@ -192,7 +193,8 @@ def test_invalid_rays_miss(scene):
 def valid_twin(rays):
     """The base ray of :func:`invalid_rays` repeated, valid (finite, 0 <= tmin < tmax)."""
     n = len(rays)
-    return batch(np.repeat(rays.origins[:, -1:].T, n, 0), np.repeat(rays.directions[:, -1:].T, n, 0))
+    return batch(np.repeat(rays.origins[:, -1:].T, n, 0),
+                 np.repeat(rays.directions[:, -1:].T, n, 0))
 
 
 def test_mixed_valid_and_invalid(scene):
@@ -221,7 +223,8 @@ def test_mixed_valid_and_invalid(scene):
 def test_any_hit_matches_closest(scene):
     """any_hit is True exactly where the closest-hit query finds a primitive."""
     V, F = scene
-    rays = concat(awkward_rays(np.random.default_rng(5), V, F), invalid_rays(np.random.default_rng(5), V))
+    rng = np.random.default_rng(5)
+    rays = concat(awkward_rays(rng, V, F), invalid_rays(rng, V))
     closest = brute_force(V, F, rays)
     occluded = brute_force(V, F, rays, any_hit=True)
     assert occluded.dtype == bool and occluded.shape == (len(rays),)
@@ -285,13 +288,14 @@ def test_open_interval_at_tmin_and_tmax():
     t = F32(7.5)
     below, above = np.nextafter(t, F32(0)), np.nextafter(t, F32(np.inf))
     o, d = [[0.25, 10, 0.625]] * 4, [[0, -1, 0]] * 4
-    rays = batch(o, d, tmin=np.array([0, below, t, 0], F32), tmax=np.array([t, np.inf, np.inf, above], F32))
+    rays = batch(o, d, tmin=np.array([0, below, t, 0], F32),
+                 tmax=np.array([t, np.inf, np.inf, above], F32))
     hits = both(SQUARE_V, SQUARE_F, rays)
     assert hits.prim.tolist() == [-1, 1, -1, 1]
 
 
 def test_shared_edge_reports_lower_index():
-    """A ray through the shared diagonal hits both triangles at the same t: the lower index wins."""
+    """A ray through the shared diagonal hits both triangles at equal t: the lower index wins."""
     rays = batch([[0.5, 10, 0.5], [0.25, 10, 0.25], [0, 10, 0], [1, 10, 1]], [[0, -1, 0]] * 4)
     hits = both(SQUARE_V, SQUARE_F, rays)
     assert hits.prim.tolist() == [0, 0, 0, 0] and (hits.t == 7.5).all()
@@ -343,6 +347,21 @@ def test_zero_area_and_in_plane_rays_never_hit():
     assert (both(V, flat, batch([[0.25, 0.25, 1]], [[0, 0, -1]])).prim == 0).all()
 
 
+def test_zero_area_triangle_with_repeated_vertex_never_hit():
+    """A triangle whose last two vertices coincide has zero area and must never be hit
+    (``Scene.degenerate_faces``: "they are kept and never hit").
+
+    Here det = e1 . (d x e2) with e1 == e2 is 0 in exact arithmetic but rounds to a tiny
+    non-zero value, and the kernel reports a hit at t = 0.5 whose point (1.15, 3.625, 5.455)
+    is not even on the segment v0-v1."""
+    V = np.array([[0.2, 1.65, 3.11], [5.32, 3.63, 8.83], [5.32, 3.63, 8.83]], np.float32)
+    F = np.array([[0, 1, 2]], np.int32)
+    rays = batch([[2.1, 5.6, 7.8]], [[-1.9, -3.95, -4.69]])
+    hits = both(V, F, rays)
+    assert hits.prim.tolist() == [-1], f"zero-area triangle hit at t={hits.t[0]}"
+    assert not brute_force(V, F, rays, any_hit=True)[0]
+
+
 def test_closest_hit_against_float64(scene):
     """Where a float64 Moller-Trumbore has a clear winner, brute force reports it (t to 1e-4)."""
     V, F = scene
@@ -378,7 +397,8 @@ def test_closest_hit_against_float64(scene):
     # the reported (t, u, v) describe the same point
     h = hits.prim >= 0
     P_ray = o[h, 0] + hits.t[h, None] * d[h, 0]
-    P_tri = v0[hits.prim[h]] + hits.u[h, None] * e1[hits.prim[h]] + hits.v[h, None] * e2[hits.prim[h]]
+    k = hits.prim[h]
+    P_tri = v0[k] + hits.u[h, None] * e1[k] + hits.v[h, None] * e2[k]
     np.testing.assert_allclose(P_ray, P_tri, atol=1e-3)
 
 

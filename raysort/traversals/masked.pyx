@@ -7,14 +7,15 @@ mask the children inherit, and a node is entered if any lane hits.
 """
 from libc.stdint cimport int32_t, uint8_t
 from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box4, rs_tri4, rs_active4
-from raysort.traversals._common cimport (Geometry, Scratch, run, lowest_bit, left_first,
+from raysort.traversals._common cimport (prefetch_leaf, Geometry, Scratch, run, lowest_bit, left_first,
                                          push_children)
 
 from raysort.plugin import Traversal
 
 
 cdef void trace_masked(const Geometry *g, rs_rays *r, int start, int count, int any_hit,
-                       Scratch *w, rs_counters *c) noexcept nogil:
+                       Scratch *w, rs_counters *counters) noexcept nogil:
+    cdef rs_counters c = counters[0]    # a local copy stays in registers
     cdef int groups = (count + 3) // 4, sp, node, level, j, k, hits, lane
     cdef int32_t *stack = w.stack
     cdef uint8_t *parent
@@ -32,6 +33,7 @@ cdef void trace_masked(const Geometry *g, rs_rays *r, int start, int count, int 
         node = stack[2 * sp]
         level = stack[2 * sp + 1]
         n = &g.nodes[node]
+        prefetch_leaf(g, n)
         parent = w.masks + level * groups
         mask = parent + groups
         hits = 0
@@ -56,6 +58,8 @@ cdef void trace_masked(const Geometry *g, rs_rays *r, int start, int count, int 
             j += 1
         lane = start + 4 * j + lowest_bit(mask[j])
         sp = push_children(g, node, left_first(n, r, lane), stack, sp, level + 1)
+    counters[0] = c
+
 
 
 class MaskedTraversal(Traversal):

@@ -13,14 +13,15 @@ every test is a SIMD test.
 from libc.stdint cimport int32_t
 from raysort._types cimport (rs_node, rs_rays, rs_frustum, rs_counters, rs_box4, rs_tri4,
                              rs_ia_miss, rs_active4)
-from raysort.traversals._common cimport (Geometry, Scratch, run, lowest_bit, left_first,
+from raysort.traversals._common cimport (prefetch_leaf, Geometry, Scratch, run, lowest_bit, left_first,
                                          frustum_of, push_children)
 
 from raysort.plugin import Traversal
 
 
 cdef void trace_partition(const Geometry *g, rs_rays *r, int start, int count, int any_hit,
-                          Scratch *w, rs_counters *c) noexcept nogil:
+                          Scratch *w, rs_counters *counters) noexcept nogil:
+    cdef rs_counters c = counters[0]    # a local copy stays in registers
     cdef int groups = (count + 3) // 4, sp, node, ie, live, j, k, m, m0, tmp
     cdef int32_t *stack = w.stack
     cdef int32_t *ids = w.ids
@@ -33,6 +34,7 @@ cdef void trace_partition(const Geometry *g, rs_rays *r, int start, int count, i
             ids[live] = start + 4 * j
             live += 1
     if live == 0:
+        counters[0] = c
         return
     stack[0] = 0
     stack[1] = live
@@ -42,6 +44,7 @@ cdef void trace_partition(const Geometry *g, rs_rays *r, int start, int count, i
         node = stack[2 * sp]
         ie = stack[2 * sp + 1]
         n = &g.nodes[node]
+        prefetch_leaf(g, n)
         c.box4 += 1
         m0 = rs_box4(r, ids[0], n)
         if not m0:
@@ -69,6 +72,8 @@ cdef void trace_partition(const Geometry *g, rs_rays *r, int start, int count, i
         m = rs_active4(r, ids[0])
         sp = push_children(g, node, left_first(n, r, ids[0] + (lowest_bit(m) if m else 0)),
                            stack, sp, live)
+    counters[0] = c
+
 
 
 class PartitionTraversal(Traversal):

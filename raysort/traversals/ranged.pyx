@@ -11,7 +11,7 @@ same way from the end and the triangles are tested on [first, last].
 from libc.stdint cimport int32_t
 from raysort._types cimport (rs_node, rs_rays, rs_frustum, rs_counters, rs_box1, rs_box4,
                              rs_ia_miss, rs_active4)
-from raysort.traversals._common cimport (Geometry, Scratch, run, active, align_up,
+from raysort.traversals._common cimport (prefetch_leaf, Geometry, Scratch, run, active, align_up,
                                          align_down, lowest_bit, highest_bit, left_first,
                                          frustum_of, leaf_range, push_children)
 
@@ -95,7 +95,8 @@ cdef inline int last_hit(const rs_rays *r, const rs_node *n, int first, int end,
 
 
 cdef void trace_ranged(const Geometry *g, rs_rays *r, int start, int count, int any_hit,
-                       Scratch *w, rs_counters *c) noexcept nogil:
+                       Scratch *w, rs_counters *counters) noexcept nogil:
+    cdef rs_counters c = counters[0]    # a local copy stays in registers
     cdef int end = start + count, sp = 0, node, first, last
     cdef int32_t *stack = w.stack
     cdef const rs_node *n
@@ -108,15 +109,18 @@ cdef void trace_ranged(const Geometry *g, rs_rays *r, int start, int count, int 
         sp -= 1
         node = stack[2 * sp]
         n = &g.nodes[node]
-        first = first_hit(r, n, stack[2 * sp + 1], end, &f, c)
+        prefetch_leaf(g, n)
+        first = first_hit(r, n, stack[2 * sp + 1], end, &f, &c)
         if first == end:
             continue
         if n.count:
-            last = last_hit(r, n, first, end, c)
-            leaf_range(g, n, r, first, last + 1, any_hit, c)
+            last = last_hit(r, n, first, end, &c)
+            leaf_range(g, n, r, first, last + 1, any_hit, &c)
             continue
         # both children get [first, end); the far one is visited second
         sp = push_children(g, node, left_first(n, r, first), stack, sp, first)
+    counters[0] = c
+
 
 
 class RangedTraversal(Traversal):

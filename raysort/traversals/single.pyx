@@ -2,13 +2,14 @@
 """``single``: one ray at a time, the scalar reference traversal."""
 from libc.stdint cimport int32_t
 from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box1, rs_tri1, rs_prefetch
-from raysort.traversals._common cimport Geometry, Scratch, run, active, left_first
+from raysort.traversals._common cimport prefetch_leaf, Geometry, Scratch, run, active, left_first
 
 from raysort.plugin import Traversal
 
 
 cdef void trace_single(const Geometry *g, rs_rays *r, int start, int count, int any_hit,
-                       Scratch *w, rs_counters *c) noexcept nogil:
+                       Scratch *w, rs_counters *counters) noexcept nogil:
+    cdef rs_counters c = counters[0]    # a local copy stays in registers
     cdef int i, k, node, sp
     cdef const rs_node *n
     cdef int32_t *stack = w.stack
@@ -19,6 +20,7 @@ cdef void trace_single(const Geometry *g, rs_rays *r, int start, int count, int 
         node = 0
         while True:
             n = &g.nodes[node]
+            prefetch_leaf(g, n)
             c.box1 += 1
             if rs_box1(r, i, n):
                 if n.count == 0:
@@ -40,6 +42,8 @@ cdef void trace_single(const Geometry *g, rs_rays *r, int start, int count, int 
                 break
             sp -= 1
             node = stack[sp]
+    counters[0] = c
+
 
 
 class SingleTraversal(Traversal):

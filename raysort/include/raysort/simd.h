@@ -86,6 +86,25 @@ RS_INLINE rs_v4m rs_or(rs_v4m a, rs_v4m b) { return _mm_or_ps(a, b); }
 RS_INLINE rs_v4f rs_blend(rs_v4m m, rs_v4f a, rs_v4f b)
 { return _mm_or_ps(_mm_and_ps(m, a), _mm_andnot_ps(m, b)); }
 RS_INLINE int rs_movemask(rs_v4m m) { return _mm_movemask_ps(m); }
+/* Per lane, the bits of `lo` where `neg` is clear and of `hi` where it is set
+ * (and the other one in *other): the near and far planes of a box axis. */
+RS_INLINE rs_v4f rs_pick(rs_v4m neg, rs_v4f lo, rs_v4f hi, rs_v4f *other)
+{
+    rs_v4f x = _mm_xor_ps(lo, hi);
+    rs_v4f near = _mm_xor_ps(lo, _mm_and_ps(neg, x));
+    *other = _mm_xor_ps(near, x);
+    return near;
+}
+/* Lanes whose sign bit is set. */
+RS_INLINE rs_v4m rs_signmask(rs_v4f a)
+{ return _mm_castsi128_ps(_mm_srai_epi32(_mm_castps_si128(a), 31)); }
+/* Subnormal lanes become a zero of the same sign. */
+RS_INLINE rs_v4f rs_flush_subnormal(rs_v4f a)
+{
+    rs_v4f sign = _mm_and_ps(a, _mm_set1_ps(-0.0f));
+    rs_v4m tiny = _mm_cmplt_ps(_mm_andnot_ps(_mm_set1_ps(-0.0f), a), _mm_set1_ps(FLT_MIN));
+    return rs_blend(tiny, sign, a);
+}
 RS_INLINE rs_v4m rs_mask_from_bits(int bits)
 {
     const __m128i lanes = _mm_setr_epi32(1, 2, 4, 8);
@@ -135,6 +154,17 @@ RS_INLINE rs_v4f rs_blend(rs_v4m m, rs_v4f a, rs_v4f b)
 { rs_v4f r; RS_LANES(k) r.f[k] = m.m[k] ? a.f[k] : b.f[k]; return r; }
 RS_INLINE int rs_movemask(rs_v4m m)
 { int bits = 0; RS_LANES(k) bits |= (m.m[k] ? 1 : 0) << k; return bits; }
+RS_INLINE rs_v4f rs_pick(rs_v4m neg, rs_v4f lo, rs_v4f hi, rs_v4f *other)
+{
+    rs_v4f near;
+    RS_LANES(k) { near.f[k] = neg.m[k] ? hi.f[k] : lo.f[k];
+                  other->f[k] = neg.m[k] ? lo.f[k] : hi.f[k]; }
+    return near;
+}
+RS_INLINE rs_v4m rs_signmask(rs_v4f a)
+{ rs_v4m r; RS_LANES(k) r.m[k] = signbit(a.f[k]) ? -1 : 0; return r; }
+RS_INLINE rs_v4f rs_flush_subnormal(rs_v4f a)
+{ rs_v4f r; RS_LANES(k) r.f[k] = fabsf(a.f[k]) < FLT_MIN ? copysignf(0.0f, a.f[k]) : a.f[k]; return r; }
 RS_INLINE rs_v4m rs_mask_from_bits(int bits)
 { rs_v4m r; RS_LANES(k) r.m[k] = (bits >> k) & 1 ? -1 : 0; return r; }
 RS_INLINE rs_v4i rs_loadi(const int32_t *p) { rs_v4i r; memcpy(r.i, p, sizeof r.i); return r; }
@@ -158,15 +188,25 @@ RS_INLINE int rs_active4(const rs_rays *r, int i)
 /* Ray-box slab tests                                                        */
 /* ------------------------------------------------------------------------ */
 
+/* Slab tests choose each axis's near and far plane by the sign of 1/d (the
+ * near plane is lo for a positive direction, hi for a negative one) and then
+ * take tn = max(t_near, tn), tf = min(t_far, tf).  A NaN slab distance, which
+ * only arises as 0 * inf (an origin exactly on a box plane with a zero or
+ * subnormal direction component: the ray lies in the plane), is the first
+ * operand of that max/min and so constrains nothing: the test stays
+ * conservative, never culling a box the ray touches. */
+
 /* Does active ray i hit the box before its current t?  (scalar) */
 RS_INLINE int rs_box1(const rs_rays *r, int i, const rs_node *n)
 {
     float tn = r->tmin[i], tf = r->t[i];
     for (int a = 0; a < 3; ++a) {
-        float t0 = (n->lo[a] - r->o[a][i]) * r->inv[a][i];
-        float t1 = (n->hi[a] - r->o[a][i]) * r->inv[a][i];
-        tn = rs_maxf(rs_minf(t0, t1), tn);
-        tf = rs_minf(rs_maxf(t0, t1), tf);
+        float inv = r->inv[a][i], o = r->o[a][i];
+        int neg = signbit(inv) != 0;
+        float t_near = ((neg ? n->hi[a] : n->lo[a]) - o) * inv;
+        float t_far = ((neg ? n->lo[a] : n->hi[a]) - o) * inv;
+        tn = rs_maxf(t_near, tn);
+        tf = rs_minf(t_far, tf);
     }
     return tn <= tf * RS_BOX_SLACK;
 }
@@ -178,10 +218,11 @@ RS_INLINE int rs_box4(const rs_rays *r, int i, const rs_node *n)
     rs_v4f tn = rs_load(r->tmin + i), tf = rs_load(r->t + i);
     for (int a = 0; a < 3; ++a) {
         rs_v4f o = rs_load(r->o[a] + i), inv = rs_load(r->inv[a] + i);
-        rs_v4f t0 = rs_mul(rs_sub(rs_set1(n->lo[a]), o), inv);
-        rs_v4f t1 = rs_mul(rs_sub(rs_set1(n->hi[a]), o), inv);
-        tn = rs_max(rs_min(t0, t1), tn);
-        tf = rs_min(rs_max(t0, t1), tf);
+        rs_v4f far_plane;
+        rs_v4f near_plane = rs_pick(rs_signmask(inv), rs_set1(n->lo[a]), rs_set1(n->hi[a]),
+                                    &far_plane);
+        tn = rs_max(rs_mul(rs_sub(near_plane, o), inv), tn);
+        tf = rs_min(rs_mul(rs_sub(far_plane, o), inv), tf);
     }
     return rs_movemask(rs_le(tn, rs_mul(tf, rs_set1(RS_BOX_SLACK))));
 }
@@ -288,7 +329,8 @@ RS_INLINE int rs_tri4(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
  * dst[0..10] = ox oy oz dx dy dz ix iy iz tmin t, with 4-wide stores (the
  * paper's temporary 4-ray packet), and resets prim/u/v.  A ray is stored
  * active only if its origin and direction are finite and 0 <= tmin < tmax;
- * otherwise (NaN rays, padding) it is stored inactive. */
+ * otherwise (NaN rays, padding) it is stored inactive.  Subnormal direction
+ * components are stored as zeros, so 1 / d is either finite or +-inf. */
 RS_INLINE void rs_gather4(float *const dst[11], int32_t *prim, float *u, float *v, int j,
                           const float *const src[8], const int32_t idx[4])
 {
@@ -308,7 +350,7 @@ RS_INLINE void rs_gather4(float *const dst[11], int32_t *prim, float *u, float *
     }
     ok = rs_and(ok, rs_and(rs_ge(row[6], zero), rs_lt(row[6], row[7])));
     for (int c = 0; c < 6; ++c) {
-        rs_v4f x = rs_blend(ok, row[c], zero);
+        rs_v4f x = rs_blend(ok, c >= 3 ? rs_flush_subnormal(row[c]) : row[c], zero);
         rs_store(dst[c] + j, x);
         if (c >= 3)
             rs_store(dst[c + 3] + j, rs_blend(ok, rs_div(rs_set1(1.0f), x), zero));
