@@ -10,6 +10,7 @@ from pathlib import Path
 
 from Cython.Build import cythonize
 from setuptools import Extension, setup
+from setuptools.command.build_ext import build_ext
 
 HERE = Path(__file__).parent
 INCLUDE = "raysort/include"
@@ -55,9 +56,28 @@ directives = {
 }
 
 JOBS = os.cpu_count() or 1
+MODE = "scalar" if _flag("RAYSORT_NO_SIMD") else "simd"
+
+
+class BuildExt(build_ext):
+    """Keep the SIMD and scalar builds apart.
+
+    setuptools rebuilds by timestamp and cannot see that RAYSORT_NO_SIMD
+    changed, so each mode keeps its own object files and every extension is
+    rebuilt when the ones already built were built in the other mode.
+    """
+
+    def run(self):
+        stamp = Path(self.build_temp).parent / "raysort-simd-mode"
+        if stamp.exists() and stamp.read_text() != MODE:
+            self.force = True
+        super().run()
+        stamp.write_text(MODE)
+
 
 setup(
     ext_modules=cythonize(_extensions(), compiler_directives=directives, include_path=["."],
                           quiet=True, nthreads=JOBS if JOBS > 1 else 0),
-    options={"build_ext": {"parallel": JOBS}},
+    cmdclass={"build_ext": BuildExt},
+    options={"build_ext": {"parallel": JOBS, "build_temp": f"build/temp-{MODE}"}},
 )

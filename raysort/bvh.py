@@ -92,10 +92,10 @@ class BVH:
             self.order, self.triangles.view(np.uint8).reshape(-1))
         self.nodes = nodes[:n_nodes].copy()
         self.vertices, self.faces = vertices, faces
+        self._update_bounds()
 
-    @property
-    def bounds(self):
-        return np.stack([self.nodes[0]["lo"], self.nodes[0]["hi"]]).astype(np.float32)
+    def _update_bounds(self):
+        self.bounds = np.stack([self.nodes[0]["lo"], self.nodes[0]["hi"]]).astype(np.float32)
 
     def refit(self, vertices):
         """Move the triangles to new positions of the same vertices and refit the boxes."""
@@ -103,6 +103,7 @@ class BVH:
         self.vertices = vertices
         _bvh.refit(vertices, faces, self.order, self.nodes.view(np.uint8).reshape(-1),
                    self.triangles.view(np.uint8).reshape(-1))
+        self._update_bounds()
 
     def stats(self):
         """Node, leaf and depth figures and the SAH cost (with this tree's C_trav)."""

@@ -184,7 +184,7 @@ class Pipeline:
             ("traversal", self.traversal), ("shader", self.shader))}
 
     # ------------------------------------------------------------------
-    def trace(self, rays, packets=None, *, any_hit=False, timings=None):
+    def trace(self, rays, packets=None, *, any_hit=False, timings=None, threads=None):
         """Sort, gather, traverse and scatter one batch of rays.
 
         Parameters
@@ -197,6 +197,10 @@ class Pipeline:
             occlusion query: return a bool array instead of hits.
         timings : dict, optional
             stage name -> seconds, added to.
+        threads : int, optional
+            split the traversal over this many threads (default: the pipeline's
+            ``threads``); sub-packets are shared out and every ray is traced by
+            one thread, so the hits do not change.
 
         Returns
         -------
@@ -219,16 +223,30 @@ class Pipeline:
             order, offsets = result
         batch = gather(rays, order, offsets)
         clock.lap("gather")
-        counters = self.traversal.intersect(self.bvh, batch, any_hit)
+        counters = self._intersect(batch, any_hit, self.threads if threads is None else threads)
         clock.lap("traverse")
-        if not isinstance(counters, Counters):
-            raise PluginContractError(
-                f"traversal {self.traversal.name!r} broke its contract: intersect() must "
-                f"return raysort.stats.Counters, got {type(counters).__name__}",
-                kind="traversals", name=self.traversal.name)
         out = scatter_occluded(batch, n) if any_hit else scatter(batch, n)
         clock.lap("scatter")
         return out, counters
+
+    def _intersect(self, batch, any_hit, threads=1):
+        if threads > 1 and batch.n_packets > 1:
+            cuts = np.linspace(0, batch.n_packets, min(threads, batch.n_packets) + 1).astype(int)
+            with ThreadPoolExecutor(max_workers=len(cuts) - 1) as pool:
+                parts = list(pool.map(
+                    lambda ab: self.traversal.intersect(self.bvh, batch.slice(*ab), any_hit),
+                    zip(cuts[:-1], cuts[1:])))
+        else:
+            parts = [self.traversal.intersect(self.bvh, batch, any_hit)]
+        total = Counters()
+        for counters in parts:
+            if not isinstance(counters, Counters):
+                raise PluginContractError(
+                    f"traversal {self.traversal.name!r} broke its contract: intersect() must "
+                    f"return raysort.stats.Counters, got {type(counters).__name__}",
+                    kind="traversals", name=self.traversal.name)
+            total = total + counters
+        return total
 
     # ------------------------------------------------------------------
     def render(self, width=256, height=256, spp=4, seed=0, *, progress=None):
@@ -307,7 +325,7 @@ class Pipeline:
             packets = np.arange(0, len(rays) + 1, n_pix, dtype=np.int32)
             depth = 0
             while len(rays):
-                hits, counters = self.trace(rays, packets, timings=stats.stage_seconds)
+                hits, counters = self.trace(rays, packets, timings=stats.stage_seconds, threads=1)
                 stats.rays[depth] = stats.rays.get(depth, 0) + len(rays)
                 stats.counters[depth] = stats.counters.get(depth, Counters()) + counters
                 clock.lap(None)
@@ -329,7 +347,7 @@ class Pipeline:
     def _trace_shadows(self, shadow, packets, radiance, stats):
         boundaries = np.searchsorted(shadow.parent, packets).astype(np.int32)
         occluded, counters = self.trace(shadow.rays, boundaries, any_hit=True,
-                                        timings=stats.stage_seconds)
+                                        timings=stats.stage_seconds, threads=1)
         stats.shadow_rays += len(shadow.rays)
         stats.shadow_counters = stats.shadow_counters + counters
         clock = _Clock(stats.stage_seconds)

@@ -175,6 +175,15 @@ class Packets:
         self.v = aligned_empty((capacity,), np.float32)
         self.index = aligned_empty((capacity,), np.int32)
 
+    def slice(self, first, last):
+        """A view of sub-packets ``[first, last)`` sharing this batch's rows and hits
+        (for splitting one traversal call over threads)."""
+        view = object.__new__(Packets)
+        for name in ("rows", "prim", "u", "v", "index"):
+            setattr(view, name, getattr(self, name))
+        view.starts, view.counts = self.starts[first:last], self.counts[first:last]
+        return view
+
     @property
     def n_packets(self):
         return len(self.counts)

@@ -127,6 +127,19 @@ def test_partial_tiles_cover_the_image(sibenik):
     assert (result.image.sum(axis=2) > 0).mean() > 0.5
 
 
+@pytest.mark.parametrize("traversal", ["single", "ranged"])
+def test_threaded_trace_gives_the_same_hits_and_counts(sibenik, workloads, traversal):
+    """Pipeline.trace splits the traversal over threads without changing anything."""
+    work = workloads(sibenik, "diffuse")
+    pipe = raysort.Pipeline(sibenik, sorter="nah", traversal=traversal)
+    one, c1 = pipe.trace(work.rays, work.packets, threads=1)
+    two, c2 = pipe.trace(work.rays, work.packets, threads=3)
+    for field in ("t", "prim", "u", "v"):
+        assert np.array_equal(getattr(one, field).view(np.uint32),
+                              getattr(two, field).view(np.uint32))
+    assert c1 == c2 and c1.rays == len(work)
+
+
 # --------------------------------------------------------------------------
 # stats and memory
 # --------------------------------------------------------------------------

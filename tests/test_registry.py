@@ -163,8 +163,9 @@ def test_available_is_sorted_and_rejects_unknown_kinds(fresh):
         raysort.available("sorter")
 
 
-def test_listing_imports_no_builtin_plugin_module():
-    """In a fresh interpreter, available() and list_plugins() import no plugin module."""
+def test_listing_imports_no_builtin_plugin_module(tmp_path):
+    """In a fresh interpreter, available() and list_plugins() import no plugin module.
+    (Run outside the repository, so that the installed package is the one imported.)"""
     code = textwrap.dedent("""
         import sys, raysort
         for kind in ("generators", "sorters", "traversals", "shaders"):
@@ -175,7 +176,7 @@ def test_listing_imports_no_builtin_plugin_module():
         print(sorted(m for m in sys.modules if m.startswith(prefixes)))
     """)
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True, timeout=120)
+                         check=True, timeout=120, cwd=tmp_path)
     assert out.stdout.strip() == "[]"
 
 

@@ -7,6 +7,7 @@ this process's build.
 """
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -60,10 +61,14 @@ def _can_build():
 @pytest.mark.skipif(not _can_build(), reason="needs the source checkout, Cython and setuptools")
 def test_scalar_build_matches_simd_build(tmp_path, sibenik):
     target = tmp_path / "scalar"
+    # build from a clean copy: no object files or extensions of an earlier build
+    source = tmp_path / "source"
+    shutil.copytree(REPO, source, ignore=shutil.ignore_patterns(
+        "build", ".venv", ".git", "*.so", "*.c", "*.egg-info", "__pycache__", ".benchmarks"))
     env = dict(os.environ, RAYSORT_NO_SIMD="1")
     build = subprocess.run(
         [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation",
-         "--target", str(target), str(REPO)],
+         "--target", str(target), str(source)],
         env=env, capture_output=True, text=True)
     assert build.returncode == 0, build.stderr[-3000:]
 
