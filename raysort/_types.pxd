@@ -68,3 +68,20 @@ cdef extern from "raysort/simd.h" nogil:
     int rs_tri4(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
     void rs_gather4(float *const dst[11], int32_t *prim, float *u, float *v, int j,
                     const float *const src[8], const int32_t idx[4])
+
+
+cdef inline rs_rays rays_view(float[:, ::1] rows, int32_t[::1] prim, float[::1] u,
+                              float[::1] v):
+    """The C view of gathered packets: ``rows`` = ox oy oz dx dy dz ix iy iz tmin t."""
+    cdef rs_rays r
+    cdef int a
+    for a in range(3):
+        r.o[a] = &rows[a, 0]
+        r.d[a] = &rows[3 + a, 0]
+        r.inv[a] = &rows[6 + a, 0]
+    r.tmin = &rows[9, 0]
+    r.t = &rows[10, 0]
+    r.prim = &prim[0]
+    r.u = &u[0]
+    r.v = &v[0]
+    return r

@@ -5,7 +5,9 @@ import numbers
 
 from raysort.errors import ConfigError
 
-__all__ = ["integer", "number", "boolean"]
+import numpy as np
+
+__all__ = ["integer", "number", "boolean", "vector3"]
 
 
 def integer(name, value, lo, hi=None):
@@ -28,6 +30,17 @@ def number(name, value, lo, hi=None, *, lo_open=False, hi_open=False):
                else f"{'>' if lo_open else '>='} {lo}")
         raise ConfigError(f"{name} must be a number {rng}, got {value!r}")
     return float(value)
+
+
+def vector3(name, value):
+    """``value`` as 3 finite floats (a float64 array); ConfigError naming ``name``."""
+    try:
+        arr = np.asarray(value, dtype=np.float64).reshape(3)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name} must be 3 numbers, got {value!r}") from None
+    if not np.isfinite(arr).all():
+        raise ConfigError(f"{name} must be finite, got {value!r}")
+    return arr
 
 
 def boolean(name, value, *, allow_none=False):

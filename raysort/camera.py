@@ -6,20 +6,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from raysort._validate import number
+from raysort._validate import number, vector3
 from raysort.errors import ConfigError
 
 __all__ = ["Camera"]
 
 
 def _vec3(name, value):
-    try:
-        v = np.asarray(value, dtype=np.float64).reshape(3)
-    except (TypeError, ValueError):
-        raise ConfigError(f"camera {name} must be 3 numbers, got {value!r}") from None
-    if not np.isfinite(v).all():
-        raise ConfigError(f"camera {name} must be finite, got {value!r}")
-    return tuple(float(x) for x in v)
+    return tuple(float(x) for x in vector3(f"camera {name}", value))
 
 
 @dataclass(frozen=True)

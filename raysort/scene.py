@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from raysort import procedural
+from raysort._validate import vector3
 from raysort.bvh import BVH
 from raysort.camera import Camera
 from raysort.errors import ConfigError, SceneError
@@ -253,12 +254,9 @@ def _typed(where, key, value, kind, what):
 
 def _number3(where, key, value):
     try:
-        arr = np.asarray(value, dtype=np.float64).reshape(3)
-    except (TypeError, ValueError):
-        raise SceneError(f"scene file '{where}': {key} must be 3 numbers, got {value!r}") from None
-    if not np.isfinite(arr).all():
-        raise SceneError(f"scene file '{where}': {key} must be finite, got {value!r}")
-    return arr
+        return vector3(key, value)
+    except ConfigError as exc:
+        raise SceneError(f"scene file '{where}': {exc}") from None
 
 
 def _non_negative3(where, key, value):

@@ -14,6 +14,19 @@ def random_rays(rng, n, bounds, *, spread=1.5):
     return RayBatch.from_arrays(origins, directions)
 
 
+def batch(origins, directions, tmin=0.0, tmax=np.inf):
+    """A RayBatch from lists of origins and directions (float32)."""
+    return RayBatch.from_arrays(np.asarray(origins, np.float32),
+                                np.asarray(directions, np.float32), tmin, tmax)
+
+
+def concat(*batches):
+    """One RayBatch holding the rays of several, in order."""
+    out = RayBatch(sum(len(b) for b in batches))
+    out.data[:, :len(out)] = np.concatenate([b.data[:, :len(b)] for b in batches], axis=1)
+    return out
+
+
 def assert_same_hits(hits, ref, label=""):
     """Same prim everywhere; same t bit for bit; same u, v where hit."""
     bad = np.flatnonzero(hits.prim != ref.prim)

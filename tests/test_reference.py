@@ -11,7 +11,7 @@ import pytest
 from raysort.rays import RayBatch
 from raysort.reference import brute_force, brute_force_numpy
 
-from _helpers import random_rays
+from _helpers import batch, concat, random_rays
 
 F32 = np.float32
 
@@ -58,16 +58,6 @@ def small_scene(rng):
     V, F = np.vstack(Vs), np.vstack(Fs)
     F = np.vstack([F, F[m:m + 10]])                       # exact duplicates of grid triangles
     return V, F[rng.permutation(len(F))].astype(np.int32)
-
-
-def batch(origins, directions, tmin=0.0, tmax=np.inf):
-    return RayBatch.from_arrays(np.asarray(origins, F32), np.asarray(directions, F32), tmin, tmax)
-
-
-def concat(*batches):
-    out = RayBatch(sum(len(b) for b in batches))
-    out.data[:, :len(out)] = np.concatenate([b.data[:, :len(b)] for b in batches], axis=1)
-    return out
 
 
 def awkward_rays(rng, V, F):

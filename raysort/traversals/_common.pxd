@@ -66,6 +66,31 @@ cdef inline bint left_first(const rs_node *node, const rs_rays *r, int i) noexce
     return r.d[node.axis][i] >= 0
 
 
+cdef inline void prefetch_leaf(const Geometry *g, const rs_node *n) noexcept nogil:
+    """Ask for a leaf's first triangles before its box test runs."""
+    if n.count:
+        rs_prefetch(&g.tris[n.offset])
+        rs_prefetch(<const char *> &g.tris[n.offset] + 64)
+
+
+cdef inline int stack_root(int32_t *stack, int32_t value) noexcept nogil:
+    """Start a (node, value) stack with the root; returns its depth, 1."""
+    stack[0] = 0
+    stack[1] = value
+    return 1
+
+
+cdef inline const rs_node *stack_pop(const Geometry *g, int32_t *stack, int *sp, int *node,
+                                     int *value) noexcept nogil:
+    """Pop (node, value) from the stack and return the node, its leaf triangles prefetched."""
+    sp[0] -= 1
+    node[0] = stack[2 * sp[0]]
+    value[0] = stack[2 * sp[0] + 1]
+    cdef const rs_node *n = &g.nodes[node[0]]
+    prefetch_leaf(g, n)
+    return n
+
+
 cdef inline int push_children(const Geometry *g, int node, bint left_first_, int32_t *stack,
                               int sp, int32_t value) noexcept nogil:
     """Push an inner node's far child, then its near child, as (node, value) pairs on
@@ -78,13 +103,6 @@ cdef inline int push_children(const Geometry *g, int node, bint left_first_, int
     stack[2 * sp + 1] = value
     stack[2 * sp + 3] = value
     return sp + 2
-
-
-cdef inline void prefetch_leaf(const Geometry *g, const rs_node *n) noexcept nogil:
-    """Ask for a leaf's first triangles before its box test runs."""
-    if n.count:
-        rs_prefetch(&g.tris[n.offset])
-        rs_prefetch(<const char *> &g.tris[n.offset] + 64)
 
 
 cdef inline void frustum_of(const rs_rays *r, int start, int count, rs_frustum *f) noexcept nogil:

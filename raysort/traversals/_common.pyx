@@ -8,24 +8,21 @@ counters into a :class:`raysort.stats.Counters`.
 """
 from libc.stdlib cimport malloc, free
 from libc.stdint cimport int32_t, uint8_t
-from raysort._types cimport rs_node, rs_tri, rs_rays, rs_counters, RS_MAX_PACKET
+from raysort._types cimport rs_node, rs_tri, rs_rays, rs_counters, RS_MAX_PACKET, rays_view
 
 from raysort.errors import PluginContractError
 from raysort.stats import Counters
 
 
 cdef object run(packet_fn fn, object bvh, object packets, bint any_hit):
-    cdef float[:, ::1] rows = packets.rows
-    cdef int32_t[::1] prim = packets.prim
-    cdef float[::1] u = packets.u, v = packets.v
     cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
     cdef const uint8_t[::1] node_bytes = bvh.nodes.view("u1").reshape(-1)
     cdef const uint8_t[::1] tri_bytes = bvh.triangles.view("u1").reshape(-1)
     cdef Geometry geo
-    cdef rs_rays rays
+    cdef rs_rays rays = rays_view(packets.rows, packets.prim, packets.u, packets.v)
     cdef Scratch w
     cdef rs_counters c
-    cdef int k, i, a, widest = 0, n = starts.shape[0]
+    cdef int k, i, widest = 0, n = starts.shape[0]
 
     for k in range(n):
         if counts[k] > widest:
@@ -41,15 +38,6 @@ cdef object run(packet_fn fn, object bvh, object packets, bint any_hit):
 
     geo.nodes = <const rs_node *> &node_bytes[0]
     geo.tris = <const rs_tri *> &tri_bytes[0] if tri_bytes.shape[0] else NULL
-    for a in range(3):
-        rays.o[a] = &rows[a, 0]
-        rays.d[a] = &rows[3 + a, 0]
-        rays.inv[a] = &rows[6 + a, 0]
-    rays.tmin = &rows[9, 0]
-    rays.t = &rows[10, 0]
-    rays.prim = &prim[0]
-    rays.u = &u[0]
-    rays.v = &v[0]
 
     w.stack_size = bvh.depth + 2
     w.groups = (widest + 3) // 4

@@ -7,8 +7,8 @@ mask the children inherit, and a node is entered if any lane hits.
 """
 from libc.stdint cimport int32_t, uint8_t
 from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box4, rs_tri4, rs_active4
-from raysort.traversals._common cimport (prefetch_leaf, Geometry, Scratch, run, lowest_bit, left_first,
-                                         push_children)
+from raysort.traversals._common cimport (Geometry, Scratch, run, stack_root, stack_pop,
+                                         push_children, lowest_bit, left_first)
 
 from raysort.plugin import Traversal
 
@@ -25,15 +25,9 @@ cdef void trace_masked(const Geometry *g, rs_rays *r, int start, int count, int 
     # masks of level L and writes its children's masks into level L + 1
     for j in range(groups):
         w.masks[j] = <uint8_t> rs_active4(r, start + 4 * j)
-    stack[0] = 0
-    stack[1] = 0
-    sp = 1
+    sp = stack_root(stack, 0)
     while sp > 0:
-        sp -= 1
-        node = stack[2 * sp]
-        level = stack[2 * sp + 1]
-        n = &g.nodes[node]
-        prefetch_leaf(g, n)
+        n = stack_pop(g, stack, &sp, &node, &level)
         parent = w.masks + level * groups
         mask = parent + groups
         hits = 0
@@ -69,11 +63,7 @@ class MaskedTraversal(Traversal):
     an active lane; every leaf costs one SIMD triangle test per triangle and
     per group whose mask is non-empty.  No IA tests, no scalar tests.
 
-    ==========  ======  =======  ==========================================
-    parameter   type    default  meaning
-    ==========  ======  =======  ==========================================
-    (none)
-    ==========  ======  =======  ==========================================
+    It takes no parameters.
     """
 
     def intersect(self, bvh, packets, any_hit=False):

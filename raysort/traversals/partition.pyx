@@ -13,8 +13,8 @@ every test is a SIMD test.
 from libc.stdint cimport int32_t
 from raysort._types cimport (rs_node, rs_rays, rs_frustum, rs_counters, rs_box4, rs_tri4,
                              rs_ia_miss, rs_active4)
-from raysort.traversals._common cimport (prefetch_leaf, Geometry, Scratch, run, lowest_bit, left_first,
-                                         frustum_of, push_children)
+from raysort.traversals._common cimport (Geometry, Scratch, run, stack_root, stack_pop,
+                                         push_children, lowest_bit, left_first, frustum_of)
 
 from raysort.plugin import Traversal
 
@@ -36,15 +36,9 @@ cdef void trace_partition(const Geometry *g, rs_rays *r, int start, int count, i
     if live == 0:
         counters[0] = c
         return
-    stack[0] = 0
-    stack[1] = live
-    sp = 1
+    sp = stack_root(stack, live)
     while sp > 0:
-        sp -= 1
-        node = stack[2 * sp]
-        ie = stack[2 * sp + 1]
-        n = &g.nodes[node]
-        prefetch_leaf(g, n)
+        n = stack_pop(g, stack, &sp, &node, &ie)
         c.box4 += 1
         m0 = rs_box4(r, ids[0], n)
         if not m0:
@@ -84,11 +78,7 @@ class PartitionTraversal(Traversal):
     one group is active, and one SIMD N_T per triangle and active group at a
     leaf.  No scalar tests, as in the paper's Table I.
 
-    ==========  ======  =======  ==========================================
-    parameter   type    default  meaning
-    ==========  ======  =======  ==========================================
-    (none)
-    ==========  ======  =======  ==========================================
+    It takes no parameters.
     """
 
     def intersect(self, bvh, packets, any_hit=False):

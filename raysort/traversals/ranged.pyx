@@ -11,9 +11,10 @@ same way from the end and the triangles are tested on [first, last].
 from libc.stdint cimport int32_t
 from raysort._types cimport (rs_node, rs_rays, rs_frustum, rs_counters, rs_box1, rs_box4,
                              rs_ia_miss, rs_active4)
-from raysort.traversals._common cimport (prefetch_leaf, Geometry, Scratch, run, active, align_up,
-                                         align_down, lowest_bit, highest_bit, left_first,
-                                         frustum_of, leaf_range, push_children)
+from raysort.traversals._common cimport (Geometry, Scratch, run, stack_root, stack_pop,
+                                         push_children, active, align_up, align_down,
+                                         lowest_bit, highest_bit, left_first, frustum_of,
+                                         leaf_range)
 
 from raysort.plugin import Traversal
 
@@ -102,15 +103,10 @@ cdef void trace_ranged(const Geometry *g, rs_rays *r, int start, int count, int 
     cdef const rs_node *n
     cdef rs_frustum f
     frustum_of(r, start, count, &f)
-    stack[0] = 0
-    stack[1] = start
-    sp = 1
+    sp = stack_root(stack, start)
     while sp > 0:
-        sp -= 1
-        node = stack[2 * sp]
-        n = &g.nodes[node]
-        prefetch_leaf(g, n)
-        first = first_hit(r, n, stack[2 * sp + 1], end, &f, &c)
+        n = stack_pop(g, stack, &sp, &node, &first)
+        first = first_hit(r, n, first, end, &f, &c)
         if first == end:
             continue
         if n.count:
@@ -132,11 +128,7 @@ class RangedTraversal(Traversal):
     all-scalar tests; SIMD N_B per aligned group tested; scalar/SIMD N_T per
     triangle for head/tail rays and aligned groups of the leaf range.
 
-    ==========  ======  =======  ==========================================
-    parameter   type    default  meaning
-    ==========  ======  =======  ==========================================
-    (none)
-    ==========  ======  =======  ==========================================
+    It takes no parameters.
     """
 
     def intersect(self, bvh, packets, any_hit=False):

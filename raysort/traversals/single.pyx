@@ -2,7 +2,8 @@
 """``single``: one ray at a time, the scalar reference traversal."""
 from libc.stdint cimport int32_t
 from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box1, rs_tri1, rs_prefetch
-from raysort.traversals._common cimport prefetch_leaf, Geometry, Scratch, run, active, left_first
+from raysort.traversals._common cimport (Geometry, Scratch, run, active, left_first,
+                                         prefetch_leaf)
 
 from raysort.plugin import Traversal
 
@@ -54,11 +55,7 @@ class SingleTraversal(Traversal):
     visiting the child on the side its direction points to first.  Counts
     scalar N_B and scalar N_T only.
 
-    ==========  ======  =======  ==========================================
-    parameter   type    default  meaning
-    ==========  ======  =======  ==========================================
-    (none)
-    ==========  ======  =======  ==========================================
+    It takes no parameters.
     """
 
     def intersect(self, bvh, packets, any_hit=False):

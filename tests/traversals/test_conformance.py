@@ -19,7 +19,7 @@ from raysort.bvh import BVH
 from raysort.rays import Hits, RayBatch, gather, scatter, scatter_occluded
 from raysort.reference import brute_force
 
-from _helpers import assert_same_hits, random_rays
+from _helpers import assert_same_hits, batch, concat, random_rays
 
 def _is_exact(name):
     try:
@@ -85,16 +85,6 @@ def take_hits(hits, index):
     out = Hits(len(hits.t[index]))
     out.t[:], out.prim[:], out.u[:], out.v[:] = (hits.t[index], hits.prim[index],
                                                  hits.u[index], hits.v[index])
-    return out
-
-
-def batch(origins, directions, tmin=0.0, tmax=np.inf):
-    return RayBatch.from_arrays(np.asarray(origins, F32), np.asarray(directions, F32), tmin, tmax)
-
-
-def concat(*batches):
-    out = RayBatch(sum(len(b) for b in batches))
-    out.data[:, :len(out)] = np.concatenate([b.data[:, :len(b)] for b in batches], axis=1)
     return out
 
 
