@@ -283,12 +283,12 @@ class Pipeline:
                            for tile in tiles}
                 try:
                     for future in as_completed(futures):
-                        finish(futures[future], future.result())
+                        finish(futures.pop(future), future.result())
                         done += 1
                         if progress:
                             progress(done, len(tiles))
                 except BaseException:
-                    for f in futures:
+                    for f in list(futures):
                         f.cancel()
                     raise
         stats.wall_seconds = time.perf_counter() - start
