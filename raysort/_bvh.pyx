@@ -12,7 +12,7 @@ all.
 from libc.stdlib cimport malloc, free, qsort
 from libc.stdint cimport int32_t
 from libc.math cimport INFINITY
-from raysort._types cimport rs_node, rs_tri, rs_minf, rs_maxf
+from raysort._types cimport rs_node, rs_node4, rs_tri, rs_minf, rs_maxf
 
 import numpy as np
 
@@ -267,6 +267,108 @@ cdef void refit_nodes(rs_node *nodes, int n_nodes, const float[:, ::1] vertices,
                 for a in range(3):
                     node.lo[a] = rs_minf(nodes[child].lo[a], node.lo[a])
                     node.hi[a] = rs_maxf(nodes[child].hi[a], node.hi[a])
+
+
+cdef inline float node_area(const rs_node *n) noexcept nogil:
+    cdef float dx = n.hi[0] - n.lo[0], dy = n.hi[1] - n.lo[1], dz = n.hi[2] - n.lo[2]
+    return dx * dy + dy * dz + dz * dx
+
+
+cdef int collapse_nodes(const rs_node *nodes, int n_nodes, rs_node4 *out,
+                        int *depth) except -1 nogil:
+    """Collapse the binary BVH into 4-wide nodes; returns how many were written.
+
+    Each 4-wide node takes up to four descendants: the binary node's two
+    children, then repeatedly the two children of the inner child with the
+    largest surface area replace it (Embree's collapse).  Leaves keep their
+    triangle ranges.  ``out`` needs room for n_nodes entries.
+    """
+    cdef int *work = <int *> malloc(2 * (n_nodes + 1) * sizeof(int))
+    cdef int sp = 0, n_out = 1, b, w, d, k, m, pick, a
+    cdef int kids[4]
+    cdef float best
+    cdef const rs_node *c
+    cdef rs_node4 *o
+    if work == NULL:
+        with gil:
+            raise MemoryError()
+    depth[0] = 1
+    work[0] = 0            # (binary node, 4-wide slot) pairs to fill
+    work[1] = 0
+    sp = 1
+    while sp > 0:
+        sp -= 1
+        b = work[2 * sp]
+        w = work[2 * sp + 1]
+        o = &out[w]
+        # gather up to four descendants of binary node b
+        if nodes[b].count:
+            kids[0] = b                      # a leaf root: one leaf child
+            m = 1
+        else:
+            kids[0] = b + 1
+            kids[1] = nodes[b].offset
+            m = 2
+            while m < 4:
+                pick = -1
+                best = -1
+                for k in range(m):
+                    if nodes[kids[k]].count == 0 and node_area(&nodes[kids[k]]) > best:
+                        best = node_area(&nodes[kids[k]])
+                        pick = k
+                if pick < 0:
+                    break
+                d = kids[pick]
+                kids[pick] = d + 1
+                kids[m] = nodes[d].offset
+                m += 1
+        for k in range(4):
+            for a in range(3):
+                o.lo[a][k] = INFINITY
+                o.hi[a][k] = -INFINITY
+            o.child[k] = 0
+            o.count[k] = 0
+        o.pad[0] = 0
+        o.pad[1] = 0
+        for k in range(m):
+            c = &nodes[kids[k]]
+            for a in range(3):
+                o.lo[a][k] = c.lo[a]
+                o.hi[a][k] = c.hi[a]
+            if c.count:
+                o.child[k] = -c.offset - 1
+                o.count[k] = c.count
+            else:
+                o.child[k] = n_out
+                work[2 * sp] = kids[k]
+                work[2 * sp + 1] = n_out
+                sp += 1
+                n_out += 1
+    # depth: longest chain of 4-wide nodes
+    cdef int *level = <int *> malloc(n_out * sizeof(int))
+    if level == NULL:
+        free(work)
+        with gil:
+            raise MemoryError()
+    level[0] = 1
+    for w in range(n_out):              # children are always written after parents
+        for k in range(4):
+            if out[w].child[k] > 0:
+                level[out[w].child[k]] = level[w] + 1
+                if level[w] + 1 > depth[0]:
+                    depth[0] = level[w] + 1
+    free(level)
+    free(work)
+    return n_out
+
+
+def collapse(unsigned char[::1] node_bytes, unsigned char[::1] out_bytes):
+    """Collapse binary nodes into 4-wide nodes; returns (count, depth)."""
+    cdef int n_nodes = node_bytes.shape[0] // sizeof(rs_node), n_out, depth = 0
+    with nogil:
+        n_out = collapse_nodes(<const rs_node *> &node_bytes[0], n_nodes,
+                               <rs_node4 *> &out_bytes[0], &depth)
+    return n_out, depth
 
 
 def build(const float[:, ::1] vertices, const int32_t[:, ::1] faces, int max_leaf, int bins,

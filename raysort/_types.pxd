@@ -23,6 +23,13 @@ cdef extern from "raysort/types.h" nogil:
         uint8_t axis
         uint8_t flags
 
+    ctypedef struct rs_node4:
+        float lo[3][4]      # lo[axis][child]
+        float hi[3][4]
+        int32_t child[4]    # >= 0 inner node4, < 0 leaf: triangles from -child - 1
+        uint16_t count[4]   # leaf triangle count, 0 otherwise
+        int32_t pad[2]
+
     ctypedef struct rs_tri:
         float v0[3]
         float e1[3]
@@ -64,6 +71,8 @@ cdef extern from "raysort/simd.h" nogil:
     int rs_box1(const rs_rays *r, int i, const rs_node *n)
     int rs_box4(const rs_rays *r, int i, const rs_node *n)
     int rs_ia_miss(const rs_frustum *f, const rs_node *n)
+    int rs_node4_hit(const rs_rays *r, int i, const rs_node4 *n, float entry[4])
+    float RS_BOX_SLACK
     int rs_tri1(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
     int rs_tri4(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
     void rs_gather4(float *const dst[11], int32_t *prim, float *u, float *v, int j,

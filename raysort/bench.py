@@ -14,6 +14,7 @@ masked (8x8)              masked      none, 64-ray packets
 masked + nah              masked      nah
 partition + nah           partition   nah
 single                    single      none
+wide (+ nah)              wide        none / nah                  (beyond the paper)
 ========================  ==========  ==========================  =============
 
 plus every other installed sorter or traversal named with ``--sorters`` /
@@ -88,13 +89,15 @@ def default_configs(extra_sorters=(), extra_traversals=()):
         Config("masked + nah", "masked", "nah"),
         Config("partition + nah", "partition", "nah"),
         Config("single", "single", "none"),
+        Config("wide", "wide", "none"),
+        Config("wide + nah", "wide", "nah"),
     ]
     known = {"none", "nah", "nah_numpy"}
     for sorter in extra_sorters:
         if sorter not in known:
             configs.append(Config(f"ranged + {sorter}", "ranged", sorter))
     for trav in extra_traversals:
-        if trav not in {"single", "masked", "ranged", "partition"}:
+        if trav not in {"single", "masked", "ranged", "partition", "wide"}:
             configs.append(Config(trav, trav, "none"))
             configs.append(Config(f"{trav} + nah", trav, "nah"))
     return configs

@@ -8,23 +8,30 @@ edges ``e1``/``e2`` and the input index ``id``), ready for Moller-Trumbore.
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from raysort import _bvh
 from raysort._validate import integer, number
+from raysort.rays import aligned_empty
 from raysort.errors import SceneError
 
-__all__ = ["BVH", "NODE_DTYPE", "TRI_DTYPE", "prepare_triangles"]
+__all__ = ["BVH", "NODE_DTYPE", "NODE4_DTYPE", "TRI_DTYPE", "prepare_triangles"]
 
 NODE_DTYPE = np.dtype([
     ("lo", "<f4", (3,)), ("hi", "<f4", (3,)),
     ("offset", "<i4"), ("count", "<u2"), ("axis", "u1"), ("flags", "u1"),
 ])
+NODE4_DTYPE = np.dtype([
+    ("lo", "<f4", (3, 4)), ("hi", "<f4", (3, 4)),
+    ("child", "<i4", (4,)), ("count", "<u2", (4,)), ("pad", "<i4", (2,)),
+])
 TRI_DTYPE = np.dtype([
     ("v0", "<f4", (3,)), ("e1", "<f4", (3,)), ("e2", "<f4", (3,)),
     ("id", "<i4"), ("pad", "<i4", (2,)),
 ])
-assert NODE_DTYPE.itemsize == 32 and TRI_DTYPE.itemsize == 48
+assert NODE_DTYPE.itemsize == 32 and TRI_DTYPE.itemsize == 48 and NODE4_DTYPE.itemsize == 128
 
 
 def _check_mesh(vertices, faces):
@@ -76,6 +83,9 @@ class BVH:
     depth : int, number of levels
     bounds : float32 (2, 3), the root box
     vertices, faces : the mesh it was built over (vertices move with refit)
+    wide : NODE4_DTYPE array, the same tree collapsed to 4-wide nodes (built on
+        first use; child >= 0 is an inner node, child < 0 a leaf whose
+        triangles start at -child - 1)
     """
 
     def __init__(self, vertices, faces, *, max_leaf=8, bins=16, traversal_cost=1.0):
@@ -93,6 +103,18 @@ class BVH:
         self.nodes = nodes[:n_nodes].copy()
         self.vertices, self.faces = vertices, faces
         self._update_bounds()
+        self._wide = None
+        self._wide_lock = threading.Lock()
+
+    @property
+    def wide(self):
+        with self._wide_lock:
+            if self._wide is None:
+                out = aligned_empty((len(self.nodes),), NODE4_DTYPE)
+                n, self.wide_depth = _bvh.collapse(self.nodes.view(np.uint8).reshape(-1),
+                                                   out.view(np.uint8).reshape(-1))
+                self._wide = out[:n]
+            return self._wide
 
     def _update_bounds(self):
         self.bounds = np.stack([self.nodes[0]["lo"], self.nodes[0]["hi"]]).astype(np.float32)
@@ -104,6 +126,8 @@ class BVH:
         _bvh.refit(vertices, faces, self.order, self.nodes.view(np.uint8).reshape(-1),
                    self.triangles.view(np.uint8).reshape(-1))
         self._update_bounds()
+        with self._wide_lock:
+            self._wide = None       # collapsed again from the refitted boxes on use
 
     def stats(self):
         """Node, leaf and depth figures and the SAH cost (with this tree's C_trav)."""

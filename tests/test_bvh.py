@@ -317,3 +317,62 @@ def test_bad_meshes(mesh):
     with pytest.raises(SceneError):
         BVH(V, F)
 
+
+
+# ---------------------------------------------------------------------------
+# the 4-wide collapse used by the ``wide`` traversal
+# ---------------------------------------------------------------------------
+
+def _check_wide(bvh):
+    nodes, wide = bvh.nodes, bvh.wide
+    assert wide.dtype == raysort.bvh.NODE4_DTYPE and wide.ctypes.data % 16 == 0
+    leaf = nodes["count"] > 0
+    binary_leaves = sorted(zip(nodes["offset"][leaf].tolist(), nodes["count"][leaf].tolist()))
+    wide_leaves, inner_refs, depth = [], [], {0: 1}
+    for w, node in enumerate(wide):
+        for k in range(4):
+            child, count = int(node["child"][k]), int(node["count"][k])
+            lo, hi = node["lo"][:, k], node["hi"][:, k]
+            if child < 0:
+                wide_leaves.append((-child - 1, count))
+                # a leaf child's box is exactly the box of its triangles
+                tv = bvh.vertices[bvh.faces[bvh.order[-child - 1:-child - 1 + count]]]
+                assert np.array_equal(lo, tv.reshape(-1, 3).min(axis=0))
+                assert np.array_equal(hi, tv.reshape(-1, 3).max(axis=0))
+            elif child > 0:
+                assert count == 0 and child > w, "children follow their parent"
+                inner_refs.append(child)
+                depth[child] = depth[w] + 1
+                # an inner child's box contains the boxes of its own children
+                sub = wide[child]
+                used = (sub["child"] != 0) | (sub["count"] > 0)
+                assert (sub["lo"][:, used] >= lo[:, None]).all()
+                assert (sub["hi"][:, used] <= hi[:, None]).all()
+            else:                                     # an empty slot: nothing enters
+                assert count == 0 and (lo == np.inf).all() and (hi == -np.inf).all()
+    assert sorted(wide_leaves) == binary_leaves, "every leaf range exactly once"
+    assert sorted(inner_refs) == list(range(1, len(wide))), "every node has one parent"
+    assert bvh.wide_depth == max(depth.values()) <= bvh.depth
+
+
+def test_wide_collapse_of_real_scenes(sibenik, sponza):
+    for scene in (sibenik, sponza):
+        _check_wide(scene.bvh())
+
+
+def test_wide_collapse_of_tiny_trees():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 5], [6, 5, 5], [5, 6, 5]], np.float32)
+    one = BVH(V[:3], np.array([[0, 1, 2]], np.int32))           # the root is a leaf
+    _check_wide(one)
+    assert len(one.wide) == 1 and one.wide[0]["child"][0] == -1
+    two = BVH(V, np.array([[0, 1, 2], [3, 4, 5]], np.int32), max_leaf=1)
+    _check_wide(two)
+    assert len(two.wide) == 1 and sorted(two.wide[0]["count"].tolist()) == [0, 0, 1, 1]
+
+
+def test_wide_follows_a_refit(sibenik):
+    bvh = BVH(sibenik.vertices, sibenik.faces)
+    before = bvh.wide.copy()
+    bvh.refit(sibenik.vertices * np.float32(2))
+    _check_wide(bvh)
+    assert not np.array_equal(bvh.wide["hi"], before["hi"])

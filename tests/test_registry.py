@@ -23,7 +23,7 @@ from raysort.registry import parse_spec
 BUILTINS = {
     "generators": {"pinhole"},
     "sorters": {"none", "nah", "nah_numpy"},
-    "traversals": {"single", "masked", "ranged", "partition"},
+    "traversals": {"single", "masked", "ranged", "partition", "wide"},
     "shaders": {"lambert"},
 }
 
@@ -158,7 +158,7 @@ def test_builtins_are_discovered_from_entry_points(kind, fresh):
 def test_available_is_sorted_and_rejects_unknown_kinds(fresh):
     """Names come sorted; a misspelt kind is a ConfigError listing the four kinds."""
     names = raysort.available("traversals")
-    assert names == sorted(names) == ["masked", "partition", "ranged", "single"]
+    assert names == sorted(names) == ["masked", "partition", "ranged", "single", "wide"]
     with pytest.raises(ConfigError, match="kinds are: generators, sorters, traversals, shaders"):
         raysort.available("sorter")
 

@@ -9,17 +9,18 @@ head/SIMD/tail rule, child order) are compiled into each kernel, so they cost
 no call.
 """
 from libc.stdint cimport int32_t, uint8_t
-from raysort._types cimport (rs_node, rs_tri, rs_rays, rs_frustum, rs_counters,
+from raysort._types cimport (rs_node, rs_node4, rs_tri, rs_rays, rs_frustum, rs_counters,
                              rs_tri1, rs_tri4, rs_active4, rs_minf, rs_maxf, rs_prefetch)
 
 
 cdef struct Geometry:
     const rs_node *nodes    # flat depth-first BVH
     const rs_tri *tris      # triangles in BVH order
+    const rs_node4 *nodes4  # the BVH collapsed to 4-wide nodes (NULL unless asked for)
 
 
 cdef struct Scratch:
-    int32_t *stack          # 2 * stack_size ints: (node, int) pairs
+    int32_t *stack          # 12 * stack_size ints: (node, int) pairs, or wider entries
     int stack_size          # BVH depth + 2
     uint8_t *masks          # stack_size * groups lane masks (masked traversal)
     int32_t *ids            # groups ids (partition traversal)
@@ -31,7 +32,7 @@ ctypedef void (*packet_fn)(const Geometry *g, rs_rays *r, int start, int count,
                            int any_hit, Scratch *w, rs_counters *c) noexcept nogil
 
 
-cdef object run(packet_fn fn, object bvh, object packets, bint any_hit)
+cdef object run(packet_fn fn, object bvh, object packets, bint any_hit, bint wide=*)
 
 
 cdef inline bint active(const rs_rays *r, int i) noexcept nogil:

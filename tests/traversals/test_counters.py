@@ -412,3 +412,38 @@ def test_counters_add():
     assert s.available is False and (a + a).available is True
     assert b.per_ray() == {k: None for k in ("ia", "box1", "box4", "tri1", "tri4")}
     assert raysort.Counters().per_ray() == {k: 0.0 for k in ("ia", "box1", "box4", "tri1", "tri4")}
+
+
+# ---------------------------------------------------------------------------
+# wide: one 4-wide test of a node's (up to) four child boxes per node visited
+# ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("kinds, mesh, expected", [
+    # S1: the 4-wide root holds the single leaf.  Every valid ray tests the root's four
+    # child boxes once (box4 1); "h" rays enter the leaf (tri1 1), "m" rays miss it.
+    ("hhhh", S1, expect(4, box4=4, tri1=4)),
+    ("mmmm", S1, expect(4, box4=4)),
+    ("mhxh", S1, expect(3, box4=3, tri1=2)),
+    # S2: the root holds both leaves A (x 0..4) and B (x 10..14).  An "a" ray enters A
+    # only, a "b" ray B only, a "g" ray (x 6..7.5) neither: one box4 each, one tri1 per
+    # leaf entered.
+    ("aab", S2, expect(3, box4=3, tri1=3)),
+    ("gggb", S2, expect(4, box4=4, tri1=1)),
+])
+def test_wide_hand_counted(kinds, mesh, expected):
+    c, _ = counters("wide", mesh, packet(kinds))
+    assert as_tuple(c) == expected
+
+
+def test_wide_counts_only_its_kinds_and_not_packets(sib):
+    """wide counts SIMD box tests (four child boxes each) and scalar triangle tests only,
+    and traces each ray alone: its totals do not depend on order or sub-packet sizes."""
+    bvh, _, rays = sib
+    n = len(rays)
+    ref = run("wide", bvh, rays, np.arange(n), [0, n])
+    assert ref.ia == ref.box1 == ref.tri4 == 0 and ref.box4 > 0 and ref.tri1 > 0
+    assert ref.rays == valid_count(rays)
+    rng = np.random.default_rng(5)
+    for size in (1, 7, 256):
+        assert run("wide", bvh, rays, rng.permutation(n),
+                   np.append(np.arange(0, n, size), n)) == ref

@@ -227,6 +227,25 @@ RS_INLINE int rs_box4(const rs_rays *r, int i, const rs_node *n)
     return rs_movemask(rs_le(tn, rs_mul(tf, rs_set1(RS_BOX_SLACK))));
 }
 
+/* One ray (lane i) against the four child boxes of a 4-wide node: returns the
+ * 4-bit mask of children hit and stores where the ray enters each in entry[].
+ * Each lane performs exactly rs_box1's operations on that child's box. */
+RS_INLINE int rs_node4_hit(const rs_rays *r, int i, const rs_node4 *n, float entry[4])
+{
+    rs_v4f tn = rs_set1(r->tmin[i]), tf = rs_set1(r->t[i]);
+    for (int a = 0; a < 3; ++a) {
+        float inv = r->inv[a][i];
+        int neg = signbit(inv) != 0;
+        rs_v4f o = rs_set1(r->o[a][i]), iv = rs_set1(inv);
+        rs_v4f near_plane = rs_load(neg ? n->hi[a] : n->lo[a]);
+        rs_v4f far_plane = rs_load(neg ? n->lo[a] : n->hi[a]);
+        tn = rs_max(rs_mul(rs_sub(near_plane, o), iv), tn);
+        tf = rs_min(rs_mul(rs_sub(far_plane, o), iv), tf);
+    }
+    rs_store(entry, tn);
+    return rs_movemask(rs_le(tn, rs_mul(tf, rs_set1(RS_BOX_SLACK))));
+}
+
 /* Interval-arithmetic test of a whole packet (its frustum) against a box:
  * returns 1 when no ray of the packet can hit the box.  Axes on which the
  * direction changes sign (or is zero or infinite) do not cull, as in DynBVH. */

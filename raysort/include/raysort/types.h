@@ -26,6 +26,19 @@ typedef struct rs_node {
     uint8_t flags;      /* reserved, 0 */
 } rs_node;
 
+/* A node of the 4-wide BVH collapsed from the binary one (for the `wide`
+ * traversal): 128 bytes, child boxes stored structure-of-arrays so one SSE
+ * operation tests a ray against all four.  child[k] >= 0 is an inner node,
+ * child[k] < 0 a leaf whose triangles are [-child[k] - 1, ... + count[k]);
+ * an empty slot has lo = +inf, hi = -inf, so no ray ever enters it. */
+typedef struct rs_node4 {
+    float lo[3][4];     /* lo[axis][child] */
+    float hi[3][4];     /* hi[axis][child] */
+    int32_t child[4];
+    uint16_t count[4];  /* triangles of a leaf child, 0 otherwise */
+    int32_t pad[2];
+} rs_node4;
+
 /* A triangle prepared for Moller-Trumbore: 48 bytes.  `id` is the index of
  * the triangle in the input mesh; ties in t go to the lower id. */
 typedef struct rs_tri {

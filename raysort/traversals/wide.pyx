@@ -1,0 +1,100 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+"""``wide``: one ray at a time through the BVH collapsed to 4-wide nodes.
+
+Embree's design for incoherent rays, beyond the paper: each node holds four
+child boxes in structure-of-arrays form, and one 4-wide slab test checks a ray
+against all four.  The children it hits are visited nearest first; the others
+wait on the stack with their entry distance and are dropped if a closer hit
+has been found by the time they come up (``entry <= t * slack`` is exactly the
+decision a new slab test would make).  Each lane of the 4-wide test performs
+``rs_box1``'s arithmetic on one child box and triangles use ``rs_tri1``, so
+the hits equal brute force bit for bit.
+"""
+from libc.stdint cimport int32_t
+from raysort._types cimport (rs_node4, rs_rays, rs_counters, rs_tri1, rs_node4_hit,
+                             rs_prefetch, RS_BOX_SLACK)
+from raysort.traversals._common cimport Geometry, Scratch, run, active
+
+from raysort.plugin import Traversal
+
+
+cdef struct Entry:
+    int32_t ref         # >= 0: a 4-wide node; < 0: a leaf, first triangle -ref - 1
+    int32_t count       # leaf triangles
+    float entry         # where the ray enters the box
+
+
+cdef void trace_wide(const Geometry *g, rs_rays *r, int start, int count, int any_hit,
+                     Scratch *w, rs_counters *counters) noexcept nogil:
+    cdef rs_counters c = counters[0]    # a local copy stays in registers
+    cdef Entry *stack = <Entry *> w.stack
+    cdef Entry hit[4]
+    cdef Entry tmp
+    cdef float entry[4]
+    cdef int i, k, j, m, mask, sp, ref, first
+    cdef const rs_node4 *n
+    for i in range(start, start + count):
+        if not active(r, i):
+            continue
+        sp = 0
+        ref = 0
+        while True:
+            if ref >= 0:
+                n = &g.nodes4[ref]
+                c.box4 += 1
+                mask = rs_node4_hit(r, i, n, entry)
+                # the children hit, nearest first (insertion sort of at most 4)
+                m = 0
+                for k in range(4):
+                    if mask >> k & 1:
+                        hit[m].ref = n.child[k]
+                        hit[m].count = n.count[k]
+                        hit[m].entry = entry[k]
+                        j = m
+                        while j > 0 and hit[j - 1].entry > hit[j].entry:
+                            tmp = hit[j - 1]
+                            hit[j - 1] = hit[j]
+                            hit[j] = tmp
+                            j -= 1
+                        m += 1
+                for k in range(m - 1, 0, -1):      # farther children wait, farthest deepest
+                    stack[sp] = hit[k]
+                    sp += 1
+                if m:
+                    ref = hit[0].ref
+                    first = hit[0].count
+                    if ref >= 0:
+                        rs_prefetch(&g.nodes4[ref])
+                    continue
+            else:
+                for k in range(-ref - 1, -ref - 1 + first):
+                    c.tri1 += 1
+                    rs_tri1(r, i, &g.tris[k], any_hit)
+                if not active(r, i):        # an any-hit query found its hit
+                    break
+            # the nearest waiting box the ray still reaches before its closest hit
+            ref = -1 << 30
+            while sp > 0:
+                sp -= 1
+                if stack[sp].entry <= r.t[i] * RS_BOX_SLACK:
+                    ref = stack[sp].ref
+                    first = stack[sp].count
+                    break
+            if ref == -1 << 30:
+                break
+    counters[0] = c
+
+
+class WideTraversal(Traversal):
+    """One ray at a time through a 4-wide BVH, four child boxes per SIMD test.
+
+    Beyond the paper: the structure Embree uses for incoherent rays, built by
+    collapsing raysort's binary BVH (``BVH.wide``).  Counts SIMD N_B (one
+    4-wide test of four child boxes per node visited) and scalar N_T.  Sorting
+    helps it only through memory locality.
+
+    It takes no parameters.
+    """
+
+    def intersect(self, bvh, packets, any_hit=False):
+        return run(trace_wide, bvh, packets, any_hit, True)
