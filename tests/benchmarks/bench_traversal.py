@@ -1,5 +1,6 @@
 """Each traversal on Sibenik camera rays and first-bounce diffuse rays, 8x8 and
-32x32 packets, with and without the ``nah`` sorter.  ``extra_info`` holds
+32x32 packets, with and without the ``nah`` sorter (Embree too when
+raysort-embree is installed).  ``extra_info`` holds
 Mrays/s and the five Table I counters per ray.  Only the traversal is timed:
 the packets are gathered in the benchmark's setup."""
 import pytest
@@ -8,13 +9,15 @@ import raysort
 from raysort.rays import gather
 from raysort.stats import COUNTER_LABELS
 
+TRAVERSALS = ["single", "masked", "ranged", "partition", "wide"] + \
+    (["embree"] if "embree" in raysort.available("traversals") else [])
 SORTERS = {"8x8": {"type": "none", "packet_size": 64},
            "32x32": {"type": "none", "packet_size": 1024},
            "nah": "nah"}
 
 
 @pytest.mark.parametrize("sorter", list(SORTERS))
-@pytest.mark.parametrize("traversal", ["single", "masked", "ranged", "partition"])
+@pytest.mark.parametrize("traversal", TRAVERSALS)
 @pytest.mark.parametrize("kind", ["primary", "diffuse"])
 def test_traversal(benchmark, scene_cache, workload_cache, kind, traversal, sorter):
     scene = scene_cache("sibenik")
