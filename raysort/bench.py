@@ -26,11 +26,9 @@ Table I counters per ray, and can write JSON and a Fig. 2 style bar chart.
 """
 from __future__ import annotations
 
-import json
 import os
 import platform
 import sys
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -204,7 +202,7 @@ def format_report(report, stream=None):
                      f"inexact traversal, max difference {r['max_image_difference']:.2g}")
             print(f"  {r['label']:22} {r['seconds']:9.3f} {r['mrays_per_second']:9.3f} "
                   f"{r['speedup']:7.2f}x  {image}", file=stream)
-        print(f"\n  Table I (per ray)       " + "".join(f"{r['label'][:14]:>15}" for r in rows),
+        print("\n  Table I (per ray)       " + "".join(f"{r['label'][:14]:>15}" for r in rows),
               file=stream)
         for key, label in COUNTER_LABELS.items():
             cells = "".join(f"{r['counters_per_ray'][key]:15.2f}" if r["counters_available"]
@@ -231,7 +229,7 @@ def write_chart(report, path):
         import matplotlib.pyplot as plt
     except ImportError:
         raise ConfigError("the chart needs matplotlib: pip install 'raysort[bench]'") from None
-    from raysort.output import _atomic_target
+    from raysort.output import atomic_target
 
     scenes = list(report["scenes"])
     labels = [r["label"] for r in report["scenes"][scenes[0]]["configs"]]
@@ -249,7 +247,7 @@ def write_chart(report, path):
                  f"{s['depth']}, {s['threads']} thread(s)")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    with _atomic_target(path) as tmp:
+    with atomic_target(path) as tmp:
         fig.savefig(tmp, format="png", dpi=120)
     plt.close(fig)
 
@@ -259,7 +257,7 @@ def write_chart(report, path):
 # --------------------------------------------------------------------------
 
 def add_parser(sub):
-    from raysort.cli import Progress, _non_negative, _positive, _size
+    from raysort.cli import _non_negative, _positive, _size
 
     b = sub.add_parser("bench", help="reproduce the paper's Fig. 2 and Table I",
                        description=__doc__.split("\n\n")[0])
@@ -284,7 +282,7 @@ def add_parser(sub):
 
 def cmd_bench(args):
     from raysort import output
-    from raysort.cli import Progress, _write_json
+    from raysort.cli import Progress
 
     for path in (args.json, args.chart):
         if path:
@@ -313,7 +311,7 @@ def cmd_bench(args):
                        progress=Progress("bench", enabled=not args.quiet))
     format_report(report)
     if args.json:
-        _write_json(args.json, report)
+        output.write_json(args.json, report)
         print(f"\nwrote {args.json}")
     if args.chart:
         write_chart(report, args.chart)

@@ -136,20 +136,10 @@ def cmd_render(args):
     result = pipe.render(width, height, args.spp, args.seed, progress=progress)
     result.write(out, exposure=args.exposure)
     if args.json:
-        _write_json(args.json, {"settings": result.settings, "stats": result.stats.as_dict()})
+        output.write_json(args.json, {"settings": result.settings,
+                                      "stats": result.stats.as_dict()})
     _print_summary(result, out, args.stats)
     return 0
-
-
-def _write_json(path, data):
-    import json
-
-    from raysort.output import _atomic_target
-
-    with _atomic_target(path) as tmp:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(data, fh, indent=2, default=str)
-            fh.write("\n")
 
 
 # --------------------------------------------------------------------------
@@ -196,8 +186,8 @@ def build_parser():
     r.add_argument("--depth", type=_non_negative, default=None,
                    help="diffuse bounces after the primary hit (shader default: 2)")
     r.add_argument("--seed", type=_non_negative, default=0, help="random seed (0)")
-    r.add_argument("--sorter", default="none", help="sorter name or name:key=value,... (none)")
-    r.add_argument("--traversal", default="single", help="traversal name or spec (single)")
+    r.add_argument("--sorter", default="nah", help="sorter name or name:key=value,... (nah)")
+    r.add_argument("--traversal", default="wide", help="traversal name or spec (wide)")
     r.add_argument("--generator", default="pinhole", help="generator name or spec (pinhole)")
     r.add_argument("--shader", default="lambert", help="shader name or spec (lambert)")
     r.add_argument("--shadow-rays", choices=("on", "off"), default=None,

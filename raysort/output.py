@@ -37,6 +37,8 @@ __all__ = [
     "write_png",
     "read_png",
     "check_writable",
+    "atomic_target",
+    "write_json",
     "tone_map",
     "SUPPORTED_SUFFIXES",
 ]
@@ -141,7 +143,7 @@ def _fsync(path):
 
 
 @contextlib.contextmanager
-def _atomic_target(path):
+def atomic_target(path):
     """Yield a temporary file name next to `path`; rename it onto `path` on success.
 
     The temporary file is created in the same directory as `path` (so the
@@ -298,7 +300,7 @@ def write_exr(path, image, *, metadata=None):
     image = _as_rgb_float32(image)
     OpenEXR = _openexr()
     exr = _exr_file(OpenEXR, image, _exr_header(OpenEXR, metadata))
-    with _atomic_target(path) as tmp:
+    with atomic_target(path) as tmp:
         _write_exr_file(exr, tmp, path)
 
 
@@ -440,7 +442,7 @@ def write_png(path, image, *, exposure=0.0):
         If the file cannot be written.
     """
     data = _encode_png(tone_map(_as_rgb_float32(image), exposure))
-    with _atomic_target(path) as tmp:
+    with atomic_target(path) as tmp:
         _write_bytes(tmp, data)
 
 
@@ -578,3 +580,13 @@ def write_image(path, image, **kw):
                           f"{suffix or '(no suffix)'!r}; supported: "
                           f"{', '.join(SUPPORTED_SUFFIXES)}")
     writer(path, image, **kw)
+
+
+def write_json(path, data):
+    """Write ``data`` as indented JSON, atomically like the image writers."""
+    import json
+
+    with atomic_target(path) as tmp:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            json.dump(data, fh, indent=2, default=str)
+            fh.write("\n")

@@ -59,7 +59,7 @@ def test_render_plane_subprocess(tmp_path):
     """`python -m raysort render plane` exits 0 with a clean stderr, prints the Table I
     counters, and writes an EXR of exactly albedo * sky = 0.5 plus its PNG preview."""
     proc = run_module("render", "plane", "--size", "16x12", "--spp", "1", "-o", "x.exr", "-q",
-                      "--stats", cwd=tmp_path)
+                      "--stats", "--traversal", "single", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ""
     assert sorted(os.listdir(tmp_path)) == ["x.exr", "x.png"]
@@ -70,7 +70,7 @@ def test_render_plane_subprocess(tmp_path):
     assert png.shape == (12, 16, 3)
     assert (png == srgb8(0.5)).all()
     # Table I: header, and the plane's BVH is one leaf of 2 triangles that every
-    # primary ray enters: 1 box and 2 triangle tests per primary ray
+    # primary ray enters: with `single`, 1 box and 2 triangle tests per primary ray
     out = proc.stdout
     header = next(line for line in out.splitlines() if "N_IA" in line)
     for label in TABLE_I:

@@ -501,3 +501,22 @@ def test_check_writable_creates_nothing(tmp_path):
 def test_empty_path():
     with pytest.raises(OutputError, match="empty"):
         output.check_writable("")
+
+
+def test_write_json_is_atomic_and_readable(tmp_path, monkeypatch):
+    """write_json writes valid JSON through the same temporary-then-rename path; a failure
+    while writing leaves the old file and no temporary file behind."""
+    import json
+
+    path = tmp_path / "r.json"
+    output.write_json(path, {"a": 1, "b": [1.5, "x"]})
+    assert json.loads(path.read_text()) == {"a": 1, "b": [1.5, "x"]}
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(json, "dump", boom)
+    with pytest.raises(RuntimeError):
+        output.write_json(path, {"c": 2})
+    assert json.loads(path.read_text()) == {"a": 1, "b": [1.5, "x"]}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]

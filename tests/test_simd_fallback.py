@@ -49,10 +49,8 @@ print(json.dumps({"compiled": cpu.info()["compiled"], "counters": counters}))
 
 
 def _can_build():
-    try:
-        import Cython  # noqa: F401
-        import setuptools  # noqa: F401
-    except ImportError:
+    import importlib.util
+    if importlib.util.find_spec("Cython") is None or importlib.util.find_spec("setuptools") is None:
         return False
     return (REPO / "setup.py").is_file()
 
