@@ -121,6 +121,15 @@ cdef inline void frustum_of(const rs_rays *r, int start, int count, rs_frustum *
                 f.rmax[a] = rs_maxf(r.inv[a][i], f.rmax[a])
 
 
+cdef inline void leaf_ray(const Geometry *g, rs_rays *r, int i, int first, int count,
+                          int any_hit, rs_counters *c) noexcept nogil:
+    """Test ray i against triangles [first, first + count), one scalar test each."""
+    cdef int k
+    for k in range(first, first + count):
+        c.tri1 += 1
+        rs_tri1(r, i, &g.tris[k], any_hit)
+
+
 cdef inline void leaf_range(const Geometry *g, const rs_node *leaf, rs_rays *r, int first,
                             int end, int any_hit, rs_counters *c) noexcept nogil:
     """Test lanes [first, end) against every triangle of a leaf.

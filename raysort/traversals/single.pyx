@@ -3,7 +3,7 @@
 from libc.stdint cimport int32_t
 from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box1, rs_tri1, rs_prefetch
 from raysort.traversals._common cimport (Geometry, Scratch, run, active, left_first,
-                                         prefetch_leaf)
+                                         prefetch_leaf, leaf_ray)
 
 from raysort.plugin import Traversal
 
@@ -34,9 +34,7 @@ cdef void trace_single(const Geometry *g, rs_rays *r, int start, int count, int 
                         node = n.offset
                     sp += 1
                     continue
-                for k in range(n.offset, n.offset + n.count):
-                    c.tri1 += 1
-                    rs_tri1(r, i, &g.tris[k], any_hit)
+                leaf_ray(g, r, i, n.offset, n.count, any_hit, &c)
                 if not active(r, i):    # an any-hit query found its hit
                     break
             if sp == 0:

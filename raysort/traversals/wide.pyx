@@ -13,7 +13,7 @@ the hits equal brute force bit for bit.
 from libc.stdint cimport int32_t
 from raysort._types cimport (rs_node4, rs_rays, rs_counters, rs_tri1, rs_node4_hit,
                              rs_prefetch, RS_BOX_SLACK)
-from raysort.traversals._common cimport Geometry, Scratch, run, active
+from raysort.traversals._common cimport Geometry, Scratch, run, active, leaf_ray
 
 from raysort.plugin import Traversal
 
@@ -67,9 +67,7 @@ cdef void trace_wide(const Geometry *g, rs_rays *r, int start, int count, int an
                         rs_prefetch(&g.nodes4[ref])
                     continue
             else:
-                for k in range(-ref - 1, -ref - 1 + first):
-                    c.tri1 += 1
-                    rs_tri1(r, i, &g.tris[k], any_hit)
+                leaf_ray(g, r, i, -ref - 1, first, any_hit, &c)
                 if not active(r, i):        # an any-hit query found its hit
                     break
             # the nearest waiting box the ray still reaches before its closest hit
