@@ -33,7 +33,7 @@ from raysort._validate import integer
 from raysort.contract import check_sort
 from raysort.errors import ConfigError, PluginContractError
 from raysort.paths import Bounce, Paths
-from raysort.rays import RayBatch, gather, scatter, scatter_occluded
+from raysort.rays import Hits, RayBatch, gather, scatter, scatter_occluded
 from raysort.scene import Scene, load_scene
 from raysort.stats import Counters
 
@@ -149,7 +149,7 @@ class Pipeline:
         validate every sorter result; False skips the check for built-in
         sorters marked trusted (third-party sorters are always checked).
     bvh : dict, optional
-        BVH build parameters (``max_leaf``, ``bins``).
+        BVH build parameters (``max_leaf``, ``bins``, ``traversal_cost``).
     """
 
     def __init__(self, scene=None, *, generator="pinhole", sorter="nah", traversal="wide",
@@ -212,8 +212,7 @@ class Pipeline:
         packets = np.asarray(packets, dtype=np.int32)
         clock = _Clock(timings)
         if n == 0:
-            return (np.zeros(0, bool) if any_hit else scatter(gather(rays, [], [0]), 0)), \
-                Counters()
+            return (np.zeros(0, bool) if any_hit else Hits(0)), Counters()
         result = self.sorter.sort(rays, packets, self.bvh.bounds)
         clock.lap("sort")
         if self.check_sorters or not _trusted(type(self.sorter)):
@@ -303,8 +302,7 @@ class Pipeline:
         local = morton_order(w, h)
         pixels = ((y0 + local // w) * width + x0 + local % w).astype(np.int32)
         n_pix = len(pixels)
-        slots = np.zeros(n_pix, dtype=np.int32)
-        slots[:] = local                       # accumulator row = pixel's row-major index
+        slots = local                          # accumulator row = pixel's row-major index
         radiance = np.zeros((n_pix, 3), dtype=np.float64)
         stats = RenderStats()
         clock = _Clock(stats.stage_seconds)
