@@ -144,7 +144,7 @@ def _per_face(what, value, m, lo, hi):
     if arr.shape != (m, 3):
         raise SceneError(f"{what} must be 3 numbers or one row of 3 per face, got shape "
                          f"{np.shape(value)}")
-    if not (np.isfinite(arr) | np.isinf(arr)).all() or (arr < lo).any() or (arr > hi).any():
+    if np.isnan(arr).any() or (arr < lo).any() or (arr > hi).any():
         raise SceneError(f"{what} values must lie in [{lo}, {hi}]")
     return np.ascontiguousarray(arr, dtype=np.float32)
 
