@@ -415,40 +415,32 @@ def test_missing_scene_file_and_unknown_name(tmp_path):
 # bad meshes
 # --------------------------------------------------------------------------
 
+# bad mesh files written as (file name, contents); contents None: no file is written
+_BAD_MESH_FILES = {
+    "missing": ("missing.ply", None),
+    "garbage": ("garbage.ply", b"this is not a mesh\n" * 20),
+    "empty": ("empty.ply", b""),
+    "no-faces": ("nofaces.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n"),
+    "nan": ("nan.obj", b"v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n"),
+    "index-out-of-range": ("oor.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n"),
+}
+
+
 def _bad_mesh(tmp_path, kind):
     """Create a bad mesh of the given kind; returns its path."""
-    if kind == "missing":
-        return tmp_path / "missing.ply"
     if kind == "truncated":
         data = packaged_file("sibenik.ply").read_bytes()
         path = tmp_path / "truncated.ply"
         path.write_bytes(data[:len(data) // 2])
-        return path
-    if kind == "garbage":
-        path = tmp_path / "garbage.ply"
-        path.write_bytes(b"this is not a mesh\n" * 20)
-        return path
-    if kind == "empty":
-        path = tmp_path / "empty.ply"
-        path.write_bytes(b"")
-        return path
-    if kind == "no-faces":
-        path = tmp_path / "nofaces.obj"
-        path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
-        return path
-    if kind == "nan":
-        path = tmp_path / "nan.obj"
-        path.write_text("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n")
-        return path
-    if kind == "index-out-of-range":
-        path = tmp_path / "oor.obj"
-        path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n")
-        return path
-    if kind == "directory":
+    elif kind == "directory":
         path = tmp_path / "folder.ply"
         path.mkdir()
-        return path
-    raise AssertionError(kind)
+    else:
+        name, contents = _BAD_MESH_FILES[kind]
+        path = tmp_path / name
+        if contents is not None:
+            path.write_bytes(contents)
+    return path
 
 
 BAD_MESHES = ["missing", "truncated", "garbage", "empty", "no-faces", "nan",
