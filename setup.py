@@ -46,12 +46,14 @@ def _extensions():
     ]
 
 
+# The only place Cython directives are set: a `# cython:` header in a .pyx would
+# override these and silently disable the bounds-checked build.
 directives = {
     "language_level": 3,
     "boundscheck": _flag("RAYSORT_DEBUG_CYTHON"),
     "wraparound": False,
     "cdivision": True,
-    "initializedcheck": False,
+    "initializedcheck": _flag("RAYSORT_DEBUG_CYTHON"),
     "embedsignature": True,
 }
 

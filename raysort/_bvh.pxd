@@ -1,4 +1,3 @@
-# cython: language_level=3
 """Binned-SAH BVH construction and refitting; see _bvh.pyx."""
 from libc.stdint cimport int32_t
 from raysort._types cimport rs_node, rs_node4, rs_tri

@@ -1,4 +1,3 @@
-# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """Binned-SAH BVH construction and refitting (nogil).
 
 The tree is binary and stored depth first: an inner node's left child is the

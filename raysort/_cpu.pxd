@@ -1,2 +1,1 @@
-# cython: language_level=3
 """CPU feature detection; see _cpu.pyx."""

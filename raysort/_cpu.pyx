@@ -1,4 +1,3 @@
-# cython: language_level=3
 """Which SIMD path was compiled, and what this CPU supports."""
 cdef extern from "raysort/simd.h":
     const char *rs_simd_name()

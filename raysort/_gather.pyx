@@ -1,4 +1,3 @@
-# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """Gather rays into aligned sub-packets and scatter hits back (nogil).
 
 The gather follows the paper's section 3: rays are read through the sorter's

@@ -1,2 +1,1 @@
-# cython: language_level=3
 """Brute-force reference kernel; see _reference.pyx."""

@@ -1,4 +1,3 @@
-# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """Brute-force closest/any hit: every ray against every triangle (nogil)."""
 from libc.stdint cimport int32_t, uint8_t
 from raysort._types cimport rs_tri, rs_rays, rs_tri1, rays_view

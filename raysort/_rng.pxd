@@ -1,4 +1,3 @@
-# cython: language_level=3
 """Counter-based random numbers: a pure function of (seed, pixel, sample, dimension).
 
 No state is kept anywhere, so a ray's random numbers never depend on which

@@ -1,4 +1,3 @@
-# cython: language_level=3
 """C-level layouts and kernels of raysort, for Cython modules to cimport.
 
 Declares the structs of ``raysort/include/raysort/types.h`` and the shared

@@ -1,4 +1,3 @@
-# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """``pinhole``: primary rays of a pinhole camera with jittered samples."""
 from libc.math cimport sqrt, INFINITY
 from libc.stdint cimport int32_t, uint32_t

@@ -1,4 +1,3 @@
-# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """``lambert``: a Lambertian path tracer (cosine-weighted diffuse bounces)."""
 from libc.math cimport sqrt, cos, sin, fabs, M_PI, INFINITY
 from libc.stdint cimport int32_t, uint32_t

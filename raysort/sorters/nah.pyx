@@ -1,4 +1,3 @@
-# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """``nah``: the ray sorter of Nah, Jung, Park and Han (section 3 of the paper).
 
 Per large packet, in linear time and touching only ray indices:

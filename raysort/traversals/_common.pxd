@@ -1,4 +1,3 @@
-# cython: language_level=3
 """Scaffolding shared by every traversal kernel (see _common.pyx).
 
 A traversal module implements one ``packet_fn`` that traces one sub-packet

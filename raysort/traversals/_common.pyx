@@ -1,4 +1,3 @@
-# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """The driver every traversal kernel runs under.
 
 :func:`run` turns a :class:`raysort.bvh.BVH` and :class:`raysort.rays.Packets`

@@ -1,4 +1,3 @@
-# cython: language_level=3
 """The masked traversal kernel; see masked.pyx."""
 from raysort._types cimport rs_rays, rs_counters
 from raysort.traversals._common cimport Geometry, Scratch

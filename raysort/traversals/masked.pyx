@@ -1,4 +1,3 @@
-# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """``masked``: masked packet traversal (Wald, Slusallek, Benthin, Wagner 2001).
 
 The whole sub-packet descends together.  At every node each 4-ray group that

@@ -1,4 +1,3 @@
-# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """``partition``: partition traversal (Overbeck, Ramamoorthi, Mark 2008).
 
 The sub-packet keeps an array of 4-ray group ids whose prefix [0, ie) is

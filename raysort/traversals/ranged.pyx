@@ -1,4 +1,3 @@
-# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """``ranged``: DynBVH ranged packet traversal (Wald, Boulos, Shirley 2007).
 
 Follows Manta's ``DynBVH::intersectNode`` (see manta-notes section 3.2): a

@@ -1,4 +1,3 @@
-# cython: language_level=3
 """The single traversal kernel; see single.pyx."""
 from raysort._types cimport rs_rays, rs_counters
 from raysort.traversals._common cimport Geometry, Scratch

@@ -1,4 +1,3 @@
-# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """``wide``: one ray at a time through the BVH collapsed to 4-wide nodes.
 
 Embree's design for incoherent rays, beyond the paper: each node holds four
