@@ -13,7 +13,7 @@ import threading
 import numpy as np
 
 from raysort import _bvh
-from raysort._validate import integer, number
+from raysort.params import integer, number
 from raysort.rays import aligned_empty
 from raysort.errors import SceneError
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from raysort._validate import number, vector3
+from raysort.params import number, vector3
 from raysort.errors import ConfigError
 
 __all__ = ["Camera"]

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from raysort import registry
-from raysort._validate import integer
+from raysort.params import integer
 from raysort.contract import check_sort
 from raysort.errors import ConfigError, PluginContractError
 from raysort.paths import Bounce, Paths

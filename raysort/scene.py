@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from raysort import procedural
-from raysort._validate import vector3
+from raysort.params import vector3
 from raysort.bvh import BVH
 from raysort.camera import Camera
 from raysort.errors import ConfigError, SceneError

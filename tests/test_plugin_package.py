@@ -22,7 +22,6 @@ import raysort
 from raysort.contract import check_sort
 from raysort.output import read_exr
 from raysort.rays import RayBatch
-from raysort.sorters.none import fixed_packets
 
 PLUGIN_DIR = Path(__file__).resolve().parents[1] / "plugins" / "raysort-morton"
 
@@ -54,34 +53,24 @@ def morton_site(tmp_path_factory):
     raysort.refresh()
 
 
-# -- the README example, verbatim ----------------------------------------------
-class OctantSorter(raysort.Sorter):
-    """Rays of each large packet grouped by direction octant.
+# -- the README example, read from the README itself -----------------------------
+README = Path(__file__).resolve().parents[1] / "README.md"
 
-    ===========  ======  =======  ==========================================
-    parameter    type    default  meaning
-    ===========  ======  =======  ==========================================
-    packet_size  int     64       rays per sub-packet (1 .. 4096)
-    ===========  ======  =======  ==========================================
-    """
 
-    def __init__(self, *, packet_size=64):
-        if not (isinstance(packet_size, int) and 1 <= packet_size <= 4096):
-            raise ValueError(f"packet_size must be an integer in 1..4096, got {packet_size!r}")
-        self.packet_size = packet_size
-
-    def sort(self, rays, packets, bounds):
-        d = rays.directions                                  # (3, n) float32 view
-        octant = (d[0] < 0) * 1 + (d[1] < 0) * 2 + (d[2] < 0) * 4
-        packet = np.repeat(np.arange(len(packets) - 1), np.diff(packets))
-        order = np.argsort(packet * 8 + octant, kind="stable").astype(np.int32)
-        return order, fixed_packets(packets, self.packet_size)
-# -------------------------------------------------------------------------------
+def _readme_example():
+    """The first Python block of the README's "Write your own sorter" section, executed."""
+    if not README.is_file():
+        pytest.skip("README.md ships with the repository only")
+    section = README.read_text(encoding="utf-8").split("### Write your own sorter", 1)[1]
+    code = section.split("```python\n", 1)[1].split("```", 1)[0]
+    namespace = {}
+    exec(compile(code, str(README), "exec"), namespace)
+    return namespace["OctantSorter"]
 
 
 @pytest.fixture
 def octant_registered():
-    raysort.register("sorters", "octant_example", OctantSorter)
+    raysort.register("sorters", "octant_example", _readme_example())
     yield "octant_example"
     raysort.unregister("sorters", "octant_example")
 

@@ -8,9 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-import raysort
-from raysort.rays import MAX_PACKET
-from raysort.sorters.none import fixed_packets
+from raysort.sdk import MAX_PACKET, Sorter, fixed_packets, integer
 
 __all__ = ["MortonSorter", "morton_keys"]
 __version__ = "0.1.0"
@@ -42,14 +40,7 @@ def morton_keys(rays, bounds, bits):
     return key
 
 
-def _integer(name, value, lo, hi):
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
-            or not lo <= value <= hi:
-        raise ValueError(f"{name} must be an integer in {lo}..{hi}, got {value!r}")
-    return int(value)
-
-
-class MortonSorter(raysort.Sorter):
+class MortonSorter(Sorter):
     """Rays of each large packet in the order of a 6-D Morton code of origin and direction.
 
     The key interleaves the origin (x, y, z, normalised to the scene box) and
@@ -67,8 +58,8 @@ class MortonSorter(raysort.Sorter):
     """
 
     def __init__(self, *, bits=4, packet_size=64):
-        self.bits = _integer("bits", bits, 1, 10)
-        self.packet_size = _integer("packet_size", packet_size, 1, MAX_PACKET)
+        self.bits = integer("bits", bits, 1, 10)
+        self.packet_size = integer("packet_size", packet_size, 1, MAX_PACKET)
 
     def sort(self, rays, packets, bounds):
         packets = np.asarray(packets, dtype=np.int64)

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from raysort._validate import boolean
+from raysort.params import boolean
 from raysort.plugin import Generator
 from raysort.rays import RayBatch
 

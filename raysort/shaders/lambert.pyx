@@ -5,7 +5,7 @@ from raysort._rng cimport uniform
 
 import numpy as np
 
-from raysort._validate import boolean, integer
+from raysort.params import boolean, integer
 from raysort.paths import Bounce, ShadowRays
 from raysort.plugin import Shader
 from raysort.rays import RayBatch

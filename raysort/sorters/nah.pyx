@@ -21,11 +21,7 @@ from raysort._types cimport rs_minf, rs_maxf
 
 import numpy as np
 
-from raysort._validate import integer, number
-from raysort.errors import ConfigError
-from raysort.plugin import Sorter
-from raysort.rays import MAX_PACKET
-from raysort.sorters.none import fixed_packets
+from raysort.sdk import MAX_PACKET, ConfigError, Sorter, fixed_packets, integer, number
 
 DEF BUCKETS = 24
 DEF KEYS = 24 * 8

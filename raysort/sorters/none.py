@@ -3,21 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from raysort._validate import integer
-from raysort.plugin import Sorter
-from raysort.rays import MAX_PACKET
+from raysort.sdk import MAX_PACKET, Sorter, fixed_packets, integer
 
-__all__ = ["NoneSorter", "fixed_packets"]
-
-
-def fixed_packets(packets, size):
-    """Offsets that cut every large packet ``[packets[i], packets[i+1])`` into pieces of ``size``."""
-    packets = np.asarray(packets, dtype=np.int64)
-    lengths = np.diff(packets)
-    pieces = (lengths + size - 1) // size
-    first = np.repeat(packets[:-1], pieces)
-    k = np.arange(int(pieces.sum())) - np.repeat(np.cumsum(pieces) - pieces, pieces)
-    return np.append(first + k * size, packets[-1]).astype(np.int32)
+__all__ = ["NoneSorter"]
 
 
 class NoneSorter(Sorter):

@@ -1,0 +1,42 @@
+"""raysort's plugin SDK: everything a plugin author needs, and nothing else.
+
+A sorter, traversal, shader or generator, built in or from another package,
+imports from here (and, in Cython, cimports the C layouts of
+``raysort/_types.pxd`` built against :func:`get_include`)::
+
+    from raysort.sdk import Sorter, fixed_packets, integer
+
+* **base classes** of the four plugin kinds, and the containers they read and
+  write (:class:`RayBatch`, :class:`Packets`, :class:`Hits`, :class:`Paths`,
+  :class:`Bounce`, :class:`ShadowRays`, :class:`Counters`);
+* **packet helpers** (:func:`fixed_packets`) and layout limits
+  (:data:`MAX_PACKET`);
+* **parameter validators** (:func:`integer`, :func:`number`, :func:`boolean`,
+  :func:`vector3`), which raise :class:`ConfigError` naming the parameter;
+* **contract checks** (:func:`check_sort`), the same ones the pipeline runs on
+  every plugin from outside raysort.
+"""
+from raysort.contract import check_sort
+from raysort.errors import ConfigError, PluginContractError
+from raysort.params import boolean, integer, number, vector3
+from raysort.paths import Bounce, Paths, ShadowRays
+from raysort.plugin import Generator, Shader, Sorter, Traversal
+from raysort.rays import MAX_PACKET, Hits, Packets, RayBatch
+from raysort.sdk.packets import fixed_packets
+from raysort.stats import Counters
+
+
+def get_include():
+    """Directory to add to ``include_dirs`` to build a Cython plugin against raysort."""
+    import raysort
+
+    return raysort.get_include()
+
+
+__all__ = [
+    "Generator", "Sorter", "Traversal", "Shader",
+    "RayBatch", "Packets", "Hits", "Paths", "Bounce", "ShadowRays", "Counters",
+    "MAX_PACKET", "fixed_packets",
+    "integer", "number", "boolean", "vector3",
+    "check_sort", "ConfigError", "PluginContractError", "get_include",
+]
