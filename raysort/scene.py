@@ -98,6 +98,15 @@ class Scene:
         used = self.vertices[self.faces.reshape(-1)]
         return np.stack([used.min(axis=0), used.max(axis=0)]).astype(np.float32)
 
+    def face_normals(self):
+        """float32 (m, 3): each face's unit geometric normal, ``(v1 - v0) x (v2 - v0)``
+        normalised in double (zero for a face of zero area); as stored, not facing any ray."""
+        v = self.vertices.astype(np.float64)[self.faces]
+        nrm = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        length = np.linalg.norm(nrm, axis=1, keepdims=True)
+        nrm = np.divide(nrm, length, out=np.zeros_like(nrm), where=length > 0)
+        return np.ascontiguousarray(nrm, dtype=np.float32)
+
     def degenerate_faces(self):
         """Indices of degenerate faces: kept, but never hit.
 

@@ -1,7 +1,8 @@
 """``lambert``: a Lambertian path tracer (cosine-weighted diffuse bounces)."""
-from libc.math cimport sqrt, cos, sin, fabs, M_PI, INFINITY
+from libc.math cimport sqrt, M_PI, INFINITY
 from libc.stdint cimport int32_t, uint32_t
 from raysort._rng cimport uniform
+from raysort.shaders._shading cimport leave_surface, cosine_direction
 
 import numpy as np
 
@@ -24,16 +25,6 @@ cdef struct ShadeParams:
     bint emissive
 
 
-cdef inline float offset_scale(const float *p) noexcept nogil:
-    """How far to push a new origin off the surface, relative to the coordinates."""
-    cdef float m = fabs(p[0])
-    if fabs(p[1]) > m:
-        m = fabs(p[1])
-    if fabs(p[2]) > m:
-        m = fabs(p[2])
-    return (1.0 + m) * (1.0 / 8192.0)
-
-
 cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
                       const float[:, ::1] normals, const float[:, ::1] albedo,
                       const float[:, ::1] emission, const float[::1] sky,
@@ -46,7 +37,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                       float[:, ::1] sh_contrib, int *n_next, int *n_shadow) noexcept nogil:
     cdef int n = prim.shape[0], i, f, a, c, k = 0, m = 0, L
     cdef uint32_t dim = DIM_BASE + DIMS_PER_DEPTH * prm.depth
-    cdef float nrm[3], p[3], o[3], w[3], tx[3], ty[3], b[3], eps, u1, u2, r, phi, q, sgn, aa, bb
+    cdef float nrm[3], o[3], w[3], ro[3], rd[3], fn[3], u1, u2, q
     cdef float cosl, dist2, dist, wl[3], best
     for i in range(n):
         f = prim[i]
@@ -58,18 +49,11 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
             for c in range(3):
                 radiance[slot[i], c] += thr[c, i] * emission[f, c]
         # facing geometric normal and the hit point, pushed off the surface
-        sgn = 0.0
         for a in range(3):
-            nrm[a] = normals[f, a]
-            sgn = sgn + nrm[a] * rays[3 + a, i]
-        if sgn > 0:
-            for a in range(3):
-                nrm[a] = -nrm[a]
-        for a in range(3):
-            p[a] = rays[a, i] + t[i] * rays[3 + a, i]
-        eps = offset_scale(p)
-        for a in range(3):
-            o[a] = p[a] + eps * nrm[a]
+            ro[a] = rays[a, i]
+            rd[a] = rays[3 + a, i]
+            fn[a] = normals[f, a]
+        leave_surface(ro, rd, t[i], fn, nrm, o)
         # next-event estimation toward point lights (shadow rays)
         for L in range(light_pos.shape[0]):
             dist2 = 0.0
@@ -106,22 +90,11 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
             q = best if best < 0.95 else 0.95
             if uniform(prm.seed, pixel[i], sample[i], dim + 2) >= q:
                 continue
-        # cosine-weighted direction around the normal (Duff et al. 2017 basis)
+        # cosine-weighted direction around the normal
         u1 = uniform(prm.seed, pixel[i], sample[i], dim)
         u2 = uniform(prm.seed, pixel[i], sample[i], dim + 1)
-        r = sqrt(u1)
-        phi = 2.0 * M_PI * u2
-        sgn = 1.0 if nrm[2] >= 0 else -1.0
-        aa = -1.0 / (sgn + nrm[2])
-        bb = nrm[0] * nrm[1] * aa
-        tx[0] = 1.0 + sgn * nrm[0] * nrm[0] * aa
-        tx[1] = sgn * bb
-        tx[2] = -sgn * nrm[0]
-        ty[0] = bb
-        ty[1] = sgn + nrm[1] * nrm[1] * aa
-        ty[2] = -nrm[1]
+        cosine_direction(nrm, u1, u2, w)
         for a in range(3):
-            w[a] = r * cos(phi) * tx[a] + r * sin(phi) * ty[a] + sqrt(1.0 - u1) * nrm[a]
             next_rays[a, k] = o[a]
             next_rays[3 + a, k] = w[a]
         next_rays[6, k] = 0.0
@@ -185,14 +158,10 @@ class LambertShader(Shader):
         self._prepared = None
 
     def prepare(self, scene):
-        v = scene.vertices.astype(np.float64)[scene.faces]
-        nrm = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-        length = np.linalg.norm(nrm, axis=1, keepdims=True)
-        nrm = np.divide(nrm, length, out=np.zeros_like(nrm), where=length > 0)
         lights = scene.lights if self.shadow_rays in (None, True) else []
         self._prepared = (
             scene,
-            np.ascontiguousarray(nrm, dtype=np.float32),
+            scene.face_normals(),
             np.ascontiguousarray([lt.position for lt in lights], dtype=np.float32).reshape(-1, 3),
             np.ascontiguousarray([lt.intensity for lt in lights], dtype=np.float32).reshape(-1, 3),
         )
