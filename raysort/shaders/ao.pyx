@@ -1,0 +1,137 @@
+"""``ao``: ambient occlusion, the fraction of the hemisphere above each primary hit that is
+unoccluded within a distance.
+
+The standard "AO" ray kind of ray-traversal studies (Aila and Laine, "Understanding the
+efficiency of ray traversal on GPUs", HPG 2009, and most ray-sorting work since): short
+any-hit rays, cosine distributed around the surface normal, from every primary hit.
+"""
+from libc.stdint cimport int32_t, uint32_t
+from raysort._rng cimport uniform
+from raysort.shaders._shading cimport leave_surface, cosine_direction
+
+import numpy as np
+
+from raysort.params import integer, number
+from raysort.paths import Bounce, ShadowRays
+from raysort.plugin import Shader
+from raysort.rays import RayBatch
+
+# Random-number dimensions (raysort/_rng.pxd): the pinhole generator draws 0 and 1, lambert
+# 2 + 3 * depth + {0, 1, 2} for depth < max_depth <= 64, so at most 193.  AO ray k of a
+# path draws AO_DIM + 2k and AO_DIM + 2k + 1: a block of its own, [256, 256 + 2 * 256),
+# that no generator or shader of raysort shares.  The cap on samples also bounds
+# memory: a batch of n primary rays makes up to n * samples AO rays at once.
+cdef enum:
+    AO_DIM = 256
+    MAX_SAMPLES = 256
+
+#: the scene's bounding-box diagonal times this is the default occlusion distance
+DEFAULT_DISTANCE_FRACTION = 0.1
+
+
+cdef int ao_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
+                  const float[:, ::1] normals, const int32_t[::1] pixel,
+                  const int32_t[::1] sample, const int32_t[::1] slot, const float[:, ::1] thr,
+                  int samples, float distance, float background, uint32_t seed,
+                  double[:, ::1] radiance, float[:, ::1] ao_rays, int32_t[::1] ao_parent,
+                  int32_t[::1] ao_slot, float[:, ::1] ao_weight) noexcept nogil:
+    """Make ``samples`` AO rays per hit (misses add the background); returns how many."""
+    cdef int n = prim.shape[0], i, f, a, c, k, m = 0
+    cdef float nrm[3], o[3], w[3], ro[3], rd[3], fn[3]
+    for i in range(n):
+        f = prim[i]
+        if f < 0:
+            for c in range(3):
+                radiance[slot[i], c] += thr[c, i] * background
+            continue
+        for a in range(3):
+            ro[a] = rays[a, i]
+            rd[a] = rays[3 + a, i]
+            fn[a] = normals[f, a]
+        leave_surface(ro, rd, t[i], fn, nrm, o)
+        for k in range(samples):
+            cosine_direction(nrm, uniform(seed, pixel[i], sample[i], AO_DIM + 2 * k),
+                             uniform(seed, pixel[i], sample[i], AO_DIM + 2 * k + 1), w)
+            for a in range(3):
+                ao_rays[a, m] = o[a]
+                ao_rays[3 + a, m] = w[a]
+            ao_rays[6, m] = 0.0
+            ao_rays[7, m] = distance
+            for c in range(3):
+                ao_weight[c, m] = thr[c, i] / samples
+            ao_parent[m] = i
+            ao_slot[m] = slot[i]
+            m += 1
+    return m
+
+
+def _ao(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
+        const float[:, ::1] normals, const int32_t[::1] pixel, const int32_t[::1] sample,
+        const int32_t[::1] slot, const float[:, ::1] thr, int samples, float distance,
+        float background, uint32_t seed, double[:, ::1] radiance, float[:, ::1] ao_rays,
+        int32_t[::1] ao_parent, int32_t[::1] ao_slot, float[:, ::1] ao_weight):
+    """Typed entry point: make the AO rays of a batch without the GIL; returns their count."""
+    cdef int m
+    with nogil:
+        m = ao_batch(rays, t, prim, normals, pixel, sample, slot, thr, samples, distance,
+                     background, seed, radiance, ao_rays, ao_parent, ao_slot, ao_weight)
+    return m
+
+
+class AOShader(Shader):
+    """Ambient occlusion: the unoccluded fraction of the hemisphere at each primary hit.
+
+    At every primary hit, ``samples`` any-hit rays leave the surface (on the side the
+    camera sees, from the same offset point ``lambert`` uses) in cosine-distributed
+    directions and look for geometry closer than ``distance``; each unoccluded one adds
+    ``1 / samples`` to the pixel, so a pixel's value (all three channels) is the
+    cosine-weighted unoccluded fraction, averaged over the pixel's samples.  A primary ray
+    that hits nothing adds ``background``.  Paths end at the primary hit (no bounces).
+    Random numbers are a hash of (seed, pixel, sample, AO ray), as in ``lambert``, so the
+    image is bit-identical for every sorter, traversal and thread count.
+
+    ==========  ======  =======  =====================================================
+    parameter   type    default  meaning
+    ==========  ======  =======  =====================================================
+    samples     int     8        AO rays per primary hit (1..256)
+    distance    float   None     occlusion distance (> 0, may be inf); None: a tenth
+                                 of the scene's bounding-box diagonal
+    background  float   1.0      value of pixels whose primary ray hits nothing
+    ==========  ======  =======  =====================================================
+    """
+
+    def __init__(self, *, samples=8, distance=None, background=1.0):
+        self.samples = integer("samples", samples, 1, MAX_SAMPLES)
+        self.distance = None if distance is None else number("distance", distance, 0,
+                                                             lo_open=True)
+        self.background = number("background", background, 0)
+        self._prepared = None
+
+    def distance_for(self, scene):
+        """The occlusion distance used in ``scene`` (resolves ``distance=None``)."""
+        if self.distance is not None:
+            return self.distance
+        lo, hi = scene.bounds.astype(np.float64)
+        return float(np.linalg.norm(hi - lo)) * DEFAULT_DISTANCE_FRACTION
+
+    def prepare(self, scene):
+        self._prepared = (scene, scene.face_normals(), self.distance_for(scene))
+
+    def shade(self, scene, rays, hits, paths, depth, seed, radiance):
+        if self._prepared is None or self._prepared[0] is not scene:
+            self.prepare(scene)
+        _, normals, distance = self._prepared
+        n = len(rays)
+        m_max = n * self.samples
+        ao_rays = RayBatch(m_max)
+        ao_parent = np.empty(m_max, dtype=np.int32)
+        ao_slot = np.empty(m_max, dtype=np.int32)
+        ao_weight = np.empty((3, m_max), dtype=np.float32)
+        m = _ao(rays.data, hits.t, hits.prim, normals, paths.pixel, paths.sample, paths.slot,
+                paths.throughput, self.samples, distance, self.background, seed & 0xFFFFFFFF,
+                radiance, ao_rays.data, ao_parent, ao_slot, ao_weight)
+        shadow = None
+        if m:
+            shadow = ShadowRays(ao_rays.truncate(m), ao_parent[:m], ao_slot[:m],
+                                ao_weight[:, :m])
+        return Bounce(RayBatch(0), np.zeros(0, np.int32), np.zeros((3, 0), np.float32), shadow)
