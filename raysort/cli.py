@@ -42,6 +42,16 @@ def _at_least(lo):
 _positive, _non_negative = _at_least(1), _at_least(0)
 
 
+def _aov_names(text):
+    """An argparse type: comma-separated AOV layer names."""
+    from raysort.aov import parse_names
+
+    try:
+        return parse_names(text)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(str(exc))
+
+
 class Progress:
     """A progress bar on stderr: redrawn in place on a terminal, a few lines otherwise."""
 
@@ -114,7 +124,8 @@ def _print_summary(result, out, stats_table, stream=None):
                 print("    " + label.ljust(8) + "".join(f"{per[k]:12.2f}" for k in
                                                         COUNTER_LABELS), file=stream)
     if out:
-        print(f"  wrote {out} and {os.path.splitext(out)[0] + '.png'}", file=stream)
+        layers = f" (AOV layers: {', '.join(result.aov)})" if result.aov else ""
+        print(f"  wrote {out}{layers} and {os.path.splitext(out)[0] + '.png'}", file=stream)
 
 
 def cmd_render(args):
@@ -133,7 +144,7 @@ def cmd_render(args):
                     threads=args.threads)
     width, height = args.size
     progress = Progress(f"render {pipe.scene.name}", enabled=not args.quiet)
-    result = pipe.render(width, height, args.spp, args.seed, progress=progress)
+    result = pipe.render(width, height, args.spp, args.seed, progress=progress, aov=args.aov)
     result.write(out, exposure=args.exposure)
     if args.json:
         output.write_json(args.json, {"settings": result.settings,
@@ -196,6 +207,9 @@ def build_parser():
     r.add_argument("--tile", type=_positive, default=32, help="tile edge in pixels (32)")
     r.add_argument("--exposure", type=float, default=0.0, help="PNG exposure in stops (0)")
     r.add_argument("-o", "--output", default="render.exr", help="output .exr (render.exr)")
+    r.add_argument("--aov", type=_aov_names, default=[], metavar="LAYERS",
+                   help="extra EXR layers from each pixel's first primary hit, comma-separated: "
+                        "depth, normal, albedo, prim")
     r.add_argument("--stats", action="store_true", help="print the Table I counters")
     r.add_argument("--json", default=None, help="also write settings and stats as JSON")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")

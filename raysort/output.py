@@ -34,6 +34,7 @@ __all__ = [
     "write_image",
     "write_exr",
     "read_exr",
+    "read_exr_channels",
     "write_png",
     "read_png",
     "check_writable",
@@ -267,16 +268,38 @@ def _exr_header(OpenEXR, metadata):
     return header
 
 
-def _exr_file(OpenEXR, image, header):
-    """Build an OpenEXR.File with FLOAT channels R, G, B of `image`."""
+def _exr_file(OpenEXR, image, header, extra=None):
+    """Build an OpenEXR.File with FLOAT channels R, G, B of `image`, plus `extra`."""
     # OpenEXR ignores numpy strides: each channel must be its own
     # C-contiguous array (a view like image[..., 0] is written garbled).
     channels = {name: np.ascontiguousarray(image[..., i])
                 for i, name in enumerate("RGB")}
+    channels.update(extra or {})
     return OpenEXR.File(header, channels)
 
 
-def write_exr(path, image, *, metadata=None):
+def _check_channels(channels, size):
+    """Extra EXR channels as {name: C-contiguous (H, W) float32 or uint32 array}."""
+    if not isinstance(channels, dict):
+        raise TypeError(f"channels must be a dict of name -> array, "
+                        f"got {type(channels).__name__}")
+    out = {}
+    for name, data in channels.items():
+        if not isinstance(name, str) or not name or "\0" in name or name in ("R", "G", "B"):
+            raise ValueError(f"invalid extra EXR channel name {name!r}")
+        data = np.asarray(data)
+        if data.shape != size:
+            raise ValueError(f"channel {name!r} has shape {data.shape}, the image {size}")
+        if data.dtype == np.float64:
+            data = data.astype(np.float32)
+        if data.dtype not in (np.float32, np.uint32):
+            raise ValueError(f"channel {name!r} must be float32 (FLOAT) or uint32 (UINT), "
+                             f"got {data.dtype}")
+        out[name] = np.ascontiguousarray(data)
+    return out
+
+
+def write_exr(path, image, *, metadata=None, channels=None):
     """Write a linear RGB image as an OpenEXR file, atomically.
 
     Parameters
@@ -287,19 +310,24 @@ def write_exr(path, image, *, metadata=None):
         float32 or float64 array of shape (H, W, 3); stored as float32.
     metadata : dict of str -> str, optional
         Extra string attributes for the EXR header (e.g. version, settings).
+    channels : dict of str -> numpy.ndarray, optional
+        Extra channels next to R, G, B, e.g. AOV layers (``"depth.Z"``,
+        ``"normal.X"``): (H, W) arrays, float32 (FLOAT) or uint32 (UINT).
 
     Raises
     ------
     ValueError
-        If `image` has a wrong shape or dtype, or `metadata` is not accepted.
+        If `image` has a wrong shape or dtype, or `metadata` or `channels` is
+        not accepted.
     TypeError
         If `metadata` is not a dict of str -> str.
     OutputError
         If the file cannot be written.
     """
     image = _as_rgb_float32(image)
+    extra = _check_channels(channels or {}, image.shape[:2])
     OpenEXR = _openexr()
-    exr = _exr_file(OpenEXR, image, _exr_header(OpenEXR, metadata))
+    exr = _exr_file(OpenEXR, image, _exr_header(OpenEXR, metadata), extra)
     with atomic_target(path) as tmp:
         _write_exr_file(exr, tmp, path)
 
@@ -345,18 +373,31 @@ def read_exr(path):
     OutputError
         If the file is missing, is not a readable EXR file or lacks R, G or B.
     """
+    channels = read_exr_channels(path)
+    missing = [name for name in "RGB" if name not in channels]
+    if missing:
+        raise OutputError(f"cannot read {_q(path)}: no channel(s) "
+                          f"{', '.join(missing)} (has {', '.join(sorted(channels))})")
+    return np.stack([np.asarray(channels[name], dtype=np.float32)
+                     for name in "RGB"], axis=-1)
+
+
+def read_exr_channels(path):
+    """Read every channel of an OpenEXR file: {name: (H, W) array} in the
+    stored type (float32 for FLOAT, float16 for HALF, uint32 for UINT).
+
+    Raises
+    ------
+    OutputError
+        If the file is missing or is not a readable EXR file.
+    """
     _check_readable(path, _EXR_MAGIC, "an OpenEXR")
     OpenEXR = _openexr()
     try:
         channels = OpenEXR.File(os.fspath(path), separate_channels=True).channels()
     except (RuntimeError, ValueError) as exc:
         raise OutputError(f"cannot read {_q(path)}: OpenEXR: {exc}") from exc
-    missing = [name for name in "RGB" if name not in channels]
-    if missing:
-        raise OutputError(f"cannot read {_q(path)}: no channel(s) "
-                          f"{', '.join(missing)} (has {', '.join(sorted(channels))})")
-    return np.stack([np.asarray(channels[name].pixels, dtype=np.float32)
-                     for name in "RGB"], axis=-1)
+    return {name: np.asarray(channel.pixels) for name, channel in channels.items()}
 
 
 # --------------------------------------------------------------------------

@@ -37,7 +37,7 @@ from raysort.rays import Hits, RayBatch, gather, scatter, scatter_occluded
 from raysort.scene import Scene, load_scene
 from raysort.stats import Counters
 
-__all__ = ["Pipeline", "RenderResult", "RenderStats", "STAGES", "morton_order"]
+__all__ = ["Pipeline", "RenderResult", "RenderStats", "Traced", "STAGES", "morton_order"]
 
 #: stage names used in timings, in pipeline order
 STAGES = ("generate", "sort", "check", "gather", "traverse", "scatter", "shade")
@@ -109,22 +109,52 @@ class RenderStats:
         }
 
 
+@dataclass(frozen=True)
+class Traced:
+    """One batch of rays a render traced, as a ``tap`` of :meth:`Pipeline.render` sees it.
+
+    ``shadow`` is False for closest-hit rays (the primary rays at ``depth`` 0, then each
+    bounce) and True for the any-hit rays (shadow or AO rays) a shader made at ``depth``.
+    ``packets`` are the large-packet boundaries the render traced them with; ``hits`` is
+    a :class:`~raysort.rays.Hits`, or the bool ``occluded`` array of any-hit rays;
+    ``paths`` (closest-hit rays only) holds each ray's pixel, sample and tile slot.
+    Everything is in generation order and must be treated as read-only.
+    """
+
+    tile: tuple
+    depth: int
+    shadow: bool
+    rays: RayBatch
+    packets: np.ndarray
+    hits: object
+    paths: Paths | None = None
+
+
 @dataclass
 class RenderResult:
-    """A rendered image (float32 linear RGB, (height, width, 3)) with its stats."""
+    """A rendered image (float32 linear RGB, (height, width, 3)) with its stats, and the
+    AOV layers asked for (name -> (height, width[, 3]) array, see :mod:`raysort.aov`)."""
 
     image: np.ndarray
     stats: RenderStats
     settings: dict
+    aov: dict = field(default_factory=dict)
 
     def write(self, path, *, png=True, exposure=0.0):
-        """Write the EXR (and a PNG preview next to it); each file appears whole or not at all."""
+        """Write the EXR (and a PNG preview next to it); each file appears whole or not at all.
+
+        AOV layers go into the EXR as extra named channels (``depth.Z``, ``normal.X``, ...).
+        """
         from raysort import output
 
         path = os.fspath(path)
         meta = {f"raysort.{k}": str(v) for k, v in self.settings.items()}
-        output.write_image(path, self.image, **({"metadata": meta} if path.lower().endswith(
-            ".exr") else {"exposure": exposure}))
+        if path.lower().endswith(".exr"):
+            from raysort.aov import exr_channels
+
+            output.write_image(path, self.image, metadata=meta, channels=exr_channels(self.aov))
+        else:
+            output.write_image(path, self.image, exposure=exposure)
         if png and path.lower().endswith(".exr"):
             output.write_png(os.path.splitext(path)[0] + ".png", self.image, exposure=exposure)
 
@@ -248,13 +278,25 @@ class Pipeline:
         return total
 
     # ------------------------------------------------------------------
-    def render(self, width=256, height=256, spp=4, seed=0, *, progress=None):
+    def render(self, width=256, height=256, spp=4, seed=0, *, progress=None, aov=(),
+               tap=None):
         """Render the scene's camera view; returns a :class:`RenderResult`.
 
-        ``progress(done_tiles, total_tiles)`` is called as tiles finish.
+        ``progress(done_tiles, total_tiles)`` is called as tiles finish.  ``aov`` names
+        layers taken from each pixel's first primary hit (``depth``, ``normal``,
+        ``albedo``, ``prim``; see :mod:`raysort.aov`) into ``result.aov``.
+        ``tap(record)`` is called with a :class:`Traced` record for every batch of rays
+        the render traces (from the worker threads when ``threads > 1``): the rays of a
+        real render, e.g. for :mod:`raysort.workloads`.
         """
         width, height = integer("width", width, 1), integer("height", height, 1)
         spp, seed = integer("spp", spp, 1), integer("seed", seed, 0)
+        collector = None
+        if aov:
+            from raysort.aov import AovCollector
+
+            collector = AovCollector(aov, self.scene, width, height)
+            tap = collector if tap is None else _both(collector, tap)
         start = time.perf_counter()
         self.bvh  # build before the workers start
         self.shader.prepare(self.scene)
@@ -272,14 +314,14 @@ class Pipeline:
         done = 0
         if self.threads == 1:
             for tile in tiles:
-                finish(tile, self._render_tile(tile, width, height, spp, seed))
+                finish(tile, self._render_tile(tile, width, height, spp, seed, tap))
                 done += 1
                 if progress:
                     progress(done, len(tiles))
         else:
             with ThreadPoolExecutor(max_workers=self.threads) as pool:
-                futures = {pool.submit(self._render_tile, tile, width, height, spp, seed): tile
-                           for tile in tiles}
+                futures = {pool.submit(self._render_tile, tile, width, height, spp, seed,
+                                       tap): tile for tile in tiles}
                 try:
                     for future in as_completed(futures):
                         finish(futures.pop(future), future.result())
@@ -294,9 +336,9 @@ class Pipeline:
         # what determines the image (not how it was computed: threads live in stats)
         settings = dict(self.describe(), scene=self.scene.name, width=width, height=height,
                         spp=spp, seed=seed, tile=self.tile)
-        return RenderResult(image, stats, settings)
+        return RenderResult(image, stats, settings, collector.layers() if collector else {})
 
-    def _render_tile(self, tile, width, height, spp, seed):
+    def _render_tile(self, tile, width, height, spp, seed, tap=None):
         x0, y0 = tile
         w, h = min(self.tile, width - x0), min(self.tile, height - y0)
         local = morton_order(w, h)
@@ -326,6 +368,8 @@ class Pipeline:
                 hits, counters = self.trace(rays, packets, timings=stats.stage_seconds, threads=1)
                 stats.rays[depth] = stats.rays.get(depth, 0) + len(rays)
                 stats.counters[depth] = stats.counters.get(depth, Counters()) + counters
+                if tap is not None:
+                    tap(Traced(tile, depth, False, rays, packets, hits, paths))
                 clock.lap(None)
                 bounce = self.shader.shade(self.scene, rays, hits, paths, depth, seed, radiance)
                 clock.lap("shade")
@@ -335,23 +379,34 @@ class Pipeline:
                         f"raysort.paths.Bounce, got {type(bounce).__name__}",
                         kind="shaders", name=self.shader.name)
                 if bounce.shadow is not None and len(bounce.shadow.rays):
-                    self._trace_shadows(bounce.shadow, packets, radiance, stats)
+                    self._trace_shadows(bounce.shadow, packets, radiance, stats, tap, tile,
+                                        depth)
                 packets = np.searchsorted(bounce.parent, packets).astype(np.int32)
                 paths = paths.take(bounce.parent, bounce.throughput)
                 rays = bounce.rays
                 depth += 1
         return radiance, stats
 
-    def _trace_shadows(self, shadow, packets, radiance, stats):
+    def _trace_shadows(self, shadow, packets, radiance, stats, tap=None, tile=None, depth=0):
         boundaries = np.searchsorted(shadow.parent, packets).astype(np.int32)
         occluded, counters = self.trace(shadow.rays, boundaries, any_hit=True,
                                         timings=stats.stage_seconds, threads=1)
+        if tap is not None:
+            tap(Traced(tile, depth, True, shadow.rays, boundaries, occluded))
         stats.shadow_rays += len(shadow.rays)
         stats.shadow_counters = stats.shadow_counters + counters
         clock = _Clock(stats.stage_seconds)
         visible = ~occluded
         np.add.at(radiance, shadow.slot[visible], shadow.contribution[:, visible].T)
         clock.lap("shade")
+
+
+def _both(first, second):
+    """One tap that calls two."""
+    def tap(record):
+        first(record)
+        second(record)
+    return tap
 
 
 def _trusted(cls):

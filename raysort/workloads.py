@@ -1,90 +1,176 @@
-"""Standard ray batches for benchmarks and tests: camera rays and diffuse bounces.
+"""Standard ray batches for benchmarks and tests: the ray kinds traversal studies measure.
 
-Both come in large packets exactly as a render makes them (one tile sample
-pass per large packet, Morton order inside a tile), so a sorter or traversal
-measured on them sees what it sees inside :meth:`raysort.Pipeline.render`.
+Ray-tracing papers and libraries measure traversal on a standard set of ray kinds (Aila
+and Laine 2009 and most ray-sorting work since).  :func:`workload` makes each of them::
+
+    workload(scene, "primary")              # camera rays
+    workload(scene, "ao:samples=4")         # ambient-occlusion rays of the primary hits
+    workload(scene, "diffuse:depth=2")      # diffuse rays of the second bounce
+    workload(scene, "shadow")               # shadow rays to the point lights
+
+========  ==================  ==============================================  ========
+kind      parameters          the rays                                        any-hit
+========  ==================  ==============================================  ========
+primary                       pinhole camera rays, jittered                   no
+ao        samples, distance   the ``ao`` shader's rays from each primary hit  yes
+diffuse   depth (1)           ``lambert``'s cosine-weighted rays of bounce    no
+                              ``depth`` (1: the first bounce)
+shadow    depth (0)           ``lambert``'s shadow rays to the scene's point  yes
+                              lights from the hits of depth ``depth``
+========  ==================  ==============================================  ========
+
+Every workload is taken from a real render: :meth:`raysort.Pipeline.render` runs with a
+``tap`` that keeps the rays of the wanted kind, so they come in exactly the large packets,
+order and numbers a render makes (one tile sample pass per large packet, Morton order
+inside a tile, a bounce's rays in their parents' large packet), and a sorter or traversal
+measured on them sees what it sees inside a render.  Trace them the way the render does:
+``pipe.trace(work.rays, work.packets, any_hit=work.any_hit)``.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from raysort import registry
+from raysort.errors import ConfigError
+from raysort.params import integer
 from raysort.paths import Paths
 from raysort.pipeline import Pipeline
 from raysort.rays import RayBatch
+from raysort.registry import parse_spec
 
-__all__ = ["Workload", "camera_rays", "bounce_rays", "workload"]
+__all__ = ["Workload", "KINDS", "workload", "camera_rays", "bounce_rays"]
 
 
 class Workload:
-    """A ray batch with its large-packet boundaries and a label."""
+    """A ray batch with its large-packet boundaries, a label, and whether a render traces
+    it as an any-hit (occlusion) query."""
 
-    __slots__ = ("rays", "packets", "label")
+    __slots__ = ("rays", "packets", "label", "any_hit")
 
-    def __init__(self, rays, packets, label=""):
+    def __init__(self, rays, packets, label="", any_hit=False):
         self.rays, self.packets, self.label = rays, np.asarray(packets, np.int32), label
+        self.any_hit = bool(any_hit)
 
     def __len__(self):
         return len(self.rays)
 
     def __repr__(self):
-        return f"Workload({self.label!r}, rays={len(self.rays)}, packets={len(self.packets) - 1})"
+        return (f"Workload({self.label!r}, rays={len(self.rays)}, "
+                f"packets={len(self.packets) - 1}, any_hit={self.any_hit})")
 
 
-def _tiles(width, height, tile):
-    return [(x, y) for y in range(0, height, tile) for x in range(0, width, tile)]
+@dataclass(frozen=True)
+class Kind:
+    """How to make one kind of workload: the shader of the render it is taken from, and
+    which traced rays to keep (closest-hit or any-hit rays, at which depth)."""
+
+    name: str
+    params: dict        # parameter -> default (None: the shader's default)
+    any_hit: bool
+
+    def shader(self, params):
+        """The render's shader config for these (checked) parameters."""
+        if self.name == "ao":
+            return {"type": "ao", **{k: v for k, v in params.items() if v is not None}}
+        return {"type": "lambert", "max_depth": params.get("depth", 0),
+                "shadow_rays": self.name == "shadow"}
+
+    def check(self, spec, scene):
+        """The parameters of ``spec`` (a dict from :func:`raysort.registry.parse_spec`)
+        with defaults filled in; ConfigError naming what is wrong."""
+        unknown = sorted(set(spec) - {"type"} - set(self.params))
+        if unknown:
+            takes = ", ".join(self.params) or "no parameters"
+            raise ConfigError(f"workload {self.name!r} does not take {unknown[0]!r} "
+                              f"(it takes: {takes})")
+        params = {k: spec.get(k, default) for k, default in self.params.items()}
+        if "depth" in params:
+            params["depth"] = integer("depth", params["depth"], int(self.name == "diffuse"), 64)
+        if self.name == "shadow" and not scene.lights:
+            raise ConfigError(f"workload 'shadow': scene {scene.name!r} has no point lights "
+                              f"to aim shadow rays at (a scene file adds them with [[light]])")
+        return params
+
+    def depth(self, params):
+        return params.get("depth", 0)
+
+
+#: the workload kinds by name
+KINDS = {k.name: k for k in (
+    Kind("primary", {}, any_hit=False),
+    Kind("ao", {"samples": None, "distance": None}, any_hit=True),
+    Kind("diffuse", {"depth": 1}, any_hit=False),
+    Kind("shadow", {"depth": 0}, any_hit=True),
+)}
+
+
+def workload(scene, kind, *, width=256, height=256, spp=1, seed=0, tile=32,
+             generator="pinhole", threads=1):
+    """The rays of one kind that a render of ``scene`` traces, as a :class:`Workload`.
+
+    Parameters
+    ----------
+    scene : Scene
+    kind : str or dict
+        ``"primary"``, ``"ao"``, ``"diffuse"`` or ``"shadow"``, with parameters as
+        ``"name:key=value,..."`` or a dict with a ``"type"`` key (see the module doc).
+    width, height, spp, seed, tile : int
+        the render the rays are taken from.
+    generator : str or dict
+        the primary-ray generator plugin.
+    threads : int
+        render threads; the workload is the same for any number.
+    """
+    return _collect(scene, kind, width=width, height=height, spp=spp, seed=seed, tile=tile,
+                    generator=generator, threads=threads)[0]
 
 
 def camera_rays(scene, width=256, height=256, spp=1, seed=0, tile=32, generator="pinhole"):
-    """Primary rays of every tile and sample, one large packet per tile pass."""
-    from raysort.pipeline import morton_order
-
-    gen = registry.create("generators", generator)
-    batches, counts, pixel, sample = [], [], [], []
-    samples = np.arange(spp, dtype=np.int32)
-    for x0, y0 in _tiles(width, height, tile):
-        w, h = min(tile, width - x0), min(tile, height - y0)
-        local = morton_order(w, h)
-        pixels = ((y0 + local // w) * width + x0 + local % w).astype(np.int32)
-        batches.append(gen.generate(scene.camera, pixels, samples, width, height, spp, seed))
-        counts.append(np.full(spp, len(pixels)))
-        pixel.append(np.tile(pixels, spp))
-        sample.append(np.repeat(samples, len(pixels)))
-    rays = _concat(batches)
-    packets = np.concatenate([[0], np.cumsum(np.concatenate(counts))])
-    pixel, sample = np.concatenate(pixel), np.concatenate(sample)
-    return (Workload(rays, packets, f"{scene.name} primary"),
-            Paths(pixel, sample, np.zeros_like(pixel)))
+    """Primary rays of every tile and sample, one large packet per tile pass, and their
+    :class:`~raysort.paths.Paths` (pixel, sample, tile slot)."""
+    work, records = _collect(scene, "primary", width=width, height=height, spp=spp,
+                             seed=seed, tile=tile, generator=generator)
+    return work, Paths(*(np.concatenate([getattr(r.paths, f) for r in records])
+                         for f in ("pixel", "sample", "slot")))
 
 
 def bounce_rays(scene, width=256, height=256, spp=1, seed=0, depth=1, tile=32):
     """Diffuse rays of bounce ``depth`` (1 = first bounce), large packets as in a render."""
-    pipe = Pipeline(scene, sorter="none", traversal="single",
-                    shader={"type": "lambert", "max_depth": depth, "shadow_rays": False},
-                    tile=tile)
-    work, paths = camera_rays(scene, width, height, spp, seed, tile)
-    rays, packets = work.rays, work.packets
-    radiance = np.zeros((len(rays), 3))
-    pipe.shader.prepare(scene)
-    for d in range(depth):
-        hits, _ = pipe.trace(rays, packets)
-        bounce = pipe.shader.shade(scene, rays, hits, paths, d, seed, radiance)
-        packets = np.searchsorted(bounce.parent, packets).astype(np.int32)
-        paths = paths.take(bounce.parent, bounce.throughput)
-        rays = bounce.rays
-    return Workload(rays, packets, f"{scene.name} diffuse depth {depth}")
+    return workload(scene, {"type": "diffuse", "depth": depth}, width=width, height=height,
+                    spp=spp, seed=seed, tile=tile)
 
 
-def workload(scene, kind, **kw):
-    """``kind`` "primary" or "diffuse" (first bounce): a :class:`Workload`."""
-    if kind == "primary":
-        return camera_rays(scene, **kw)[0]
-    if kind == "diffuse":
-        return bounce_rays(scene, **kw)
-    raise ValueError(f"workload kind must be 'primary' or 'diffuse', got {kind!r}")
+def _collect(scene, kind, *, width, height, spp, seed, tile, generator="pinhole", threads=1):
+    """Render with a tap; returns the workload and the render's records it was made of."""
+    spec = dict(kind) if isinstance(kind, dict) else parse_spec(str(kind))
+    name = spec.get("type")
+    if name not in KINDS:
+        raise ConfigError(f"unknown workload kind {name!r}; kinds: {', '.join(KINDS)}")
+    k = KINDS[name]
+    params = k.check(spec, scene)
+    depth = k.depth(params)
+    pipe = Pipeline(scene, generator=generator, sorter="none", shader=k.shader(params),
+                    tile=tile, threads=threads)
+    kept = []
+
+    def tap(record):
+        if record.shadow == k.any_hit and record.depth == depth:
+            kept.append(record)
+
+    pipe.render(width, height, spp, seed, tap=tap)
+    # tiles in image order (rows of tiles, top to bottom), each tile's records in the
+    # order it traced them: the same list whichever thread traced which tile
+    kept.sort(key=lambda r: (r.tile[1], r.tile[0]))
+    starts = np.cumsum([0] + [len(r.rays) for r in kept], dtype=np.int64)
+    packets = np.concatenate([[0]] + [r.packets[1:] + s for r, s in zip(kept, starts)])
+    given = ",".join(f"{p}={v}" for p, v in params.items() if v is not None)
+    label = f"{scene.name} {name}" + (f":{given}" if given else "")
+    return Workload(_concat([r.rays for r in kept]), packets, label, k.any_hit), kept
 
 
 def _concat(batches):
     out = RayBatch(sum(len(b) for b in batches))
-    out.data[:, :len(out)] = np.concatenate([b.data[:, :len(b)] for b in batches], axis=1)
+    if batches:
+        out.data[:, :len(out)] = np.concatenate([b.data[:, :len(b)] for b in batches], axis=1)
     return out

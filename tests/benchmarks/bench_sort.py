@@ -1,4 +1,5 @@
-"""Sorting overhead: sort + gather of Sibenik first-bounce diffuse rays.
+"""Sorting overhead: sort + gather of each Sibenik ray kind (camera, AO, diffuse,
+shadow rays).
 
 ``extra_info`` holds the rays/s of sort + gather and the ratio of sort +
 gather time to the ranged traversal time of the same (sorted) rays, both the
@@ -11,6 +12,7 @@ import pytest
 import raysort
 from raysort.contract import check_sort
 from raysort.rays import gather
+from raysort.workloads import KINDS
 
 
 def _best(fn, setup, rounds=7):
@@ -25,9 +27,10 @@ def _best(fn, setup, rounds=7):
 
 
 @pytest.mark.parametrize("sorter", ["none", "nah", "nah_numpy"])
-def test_sort_and_gather(benchmark, scene_cache, workload_cache, sorter):
+@pytest.mark.parametrize("kind", list(KINDS))
+def test_sort_and_gather(benchmark, scene_cache, workload_cache, kind, sorter):
     scene = scene_cache("sibenik")
-    work = workload_cache("sibenik", "diffuse")
+    work = workload_cache("sibenik", kind)
     bvh = scene.bvh()
     srt = raysort.create("sorters", sorter)
 
@@ -35,13 +38,13 @@ def test_sort_and_gather(benchmark, scene_cache, workload_cache, sorter):
         order, offsets = srt.sort(work.rays, work.packets, bvh.bounds)
         return gather(work.rays, order, offsets)
 
-    benchmark.group = "sibenik diffuse: sort + gather"
+    benchmark.group = f"sibenik {kind}: sort + gather"
     benchmark.pedantic(sort_and_gather, rounds=15, warmup_rounds=2)
     overhead = benchmark.stats.stats.min
     order, offsets = check_sort(sorter, srt.sort(work.rays, work.packets, bvh.bounds),
                                 len(work), work.packets)
     ranged = raysort.create("traversals", "ranged")
-    traverse = _best(lambda packets: ranged.intersect(bvh, packets),
+    traverse = _best(lambda packets: ranged.intersect(bvh, packets, any_hit=work.any_hit),
                      lambda: gather(work.rays, order, offsets))
     benchmark.extra_info.update(
         rays=len(work), rays_per_second=len(work) / overhead,

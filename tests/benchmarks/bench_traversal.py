@@ -1,6 +1,7 @@
-"""Each traversal on Sibenik camera rays and first-bounce diffuse rays, 8x8 and
-32x32 packets, with and without the ``nah`` sorter (Embree too when
-raysort-embree is installed).  ``extra_info`` holds
+"""Each traversal on every Sibenik ray kind (camera, ambient-occlusion,
+first-bounce diffuse and shadow rays; AO and shadow rays as any-hit queries, as
+a render traces them), 8x8 and 32x32 packets, with and without the ``nah``
+sorter (Embree too when raysort-embree is installed).  ``extra_info`` holds
 Mrays/s and the five Table I counters per ray.  Only the traversal is timed:
 the packets are gathered in the benchmark's setup."""
 import pytest
@@ -8,6 +9,7 @@ import pytest
 import raysort
 from raysort.rays import gather
 from raysort.stats import COUNTER_LABELS
+from raysort.workloads import KINDS
 
 TRAVERSALS = ["single", "masked", "ranged", "partition", "wide"] + \
     (["embree"] if "embree" in raysort.available("traversals") else [])
@@ -18,7 +20,7 @@ SORTERS = {"8x8": {"type": "none", "packet_size": 64},
 
 @pytest.mark.parametrize("sorter", list(SORTERS))
 @pytest.mark.parametrize("traversal", TRAVERSALS)
-@pytest.mark.parametrize("kind", ["primary", "diffuse"])
+@pytest.mark.parametrize("kind", list(KINDS))
 def test_traversal(benchmark, scene_cache, workload_cache, kind, traversal, sorter):
     scene = scene_cache("sibenik")
     work = workload_cache("sibenik", kind)
@@ -32,7 +34,7 @@ def test_traversal(benchmark, scene_cache, workload_cache, kind, traversal, sort
         return (gather(work.rays, order, offsets),), {}
 
     def run(packets):
-        counters.append(trav.intersect(bvh, packets))
+        counters.append(trav.intersect(bvh, packets, any_hit=work.any_hit))
 
     benchmark.group = f"sibenik {kind}: traversal"
     benchmark.pedantic(run, setup=setup, rounds=7, warmup_rounds=1)

@@ -4,9 +4,10 @@ Run it with::
 
     pytest tests/benchmarks/bench_*.py --benchmark-only
 
-and compare saved runs with ``pytest-benchmark compare``.  Workloads are
-256x256 pixels, 1 spp (65,536 rays): Sibenik camera rays and first-bounce
-diffuse rays in 32x32-ray large packets, as a render makes them.
+and compare saved runs with ``pytest-benchmark compare``.  Workloads are the
+ray kinds of :data:`raysort.workloads.KINDS` ( camera rays, ambient-occlusion
+rays, first-bounce diffuse rays, shadow rays) taken from a 256x256, 1 spp render
+(65,536 camera rays), in the large packets the render makes.
 """
 import pytest
 
