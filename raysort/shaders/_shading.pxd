@@ -1,9 +1,10 @@
 """Inline shading helpers the built-in shaders share (``lambert``, ``ao``).
 
-Where a new ray leaves a surface and in which direction: the facing normal,
-the hit point pushed off the surface along it, and a cosine-weighted
-direction around that normal.  They are compiled into each shader, so they
-cost no call, and every shader that uses them makes bit for bit the same rays.
+Where a new ray leaves a surface, in which direction, and how it is stored: the
+facing normal, the hit point pushed off the surface along it, a cosine-weighted
+direction around that normal, and the ray written into a batch's rows.  They are
+compiled into each shader, so they cost no call, and every shader that uses them
+makes bit for bit the same rays.
 """
 from libc.math cimport sqrt, cos, sin, fabs, M_PI
 
@@ -24,23 +25,36 @@ cdef inline float offset_scale(const float *p) noexcept nogil:
     return (1.0 + m) * (1.0 / OFFSET_DENOMINATOR)
 
 
-cdef inline void leave_surface(const float *origin, const float *direction, float t,
-                               const float *face_normal, float *nrm, float *o) noexcept nogil:
-    """The normal facing the incoming ray (``nrm``) and the hit point ``origin + t *
-    direction`` pushed off the surface along it (``o``): where the next rays start."""
+cdef inline void leave_surface(const float[:, ::1] rays, const float[::1] t,
+                               const float[:, ::1] normals, int i, int f, float *nrm,
+                               float *o) noexcept nogil:
+    """Where ray ``i`` of a batch (rows ``ox oy oz dx dy dz ...``), which hit face ``f``
+    at ``t[i]``, goes on: the face normal turned toward the incoming ray (``nrm``) and the
+    hit point pushed off the surface along it (``o``)."""
     cdef float sgn = 0.0, p[3], eps
     cdef int a
     for a in range(3):
-        nrm[a] = face_normal[a]
-        sgn = sgn + nrm[a] * direction[a]
+        nrm[a] = normals[f, a]
+        sgn = sgn + nrm[a] * rays[3 + a, i]
     if sgn > 0:
         for a in range(3):
             nrm[a] = -nrm[a]
     for a in range(3):
-        p[a] = origin[a] + t * direction[a]
+        p[a] = rays[a, i] + t[i] * rays[3 + a, i]
     eps = offset_scale(p)
     for a in range(3):
         o[a] = p[a] + eps * nrm[a]
+
+
+cdef inline void store_ray(float[:, ::1] out, int k, const float *o, const float *w,
+                           float tmax) noexcept nogil:
+    """Write ray ``k`` of a batch's rows: origin ``o``, direction ``w``, (0, ``tmax``)."""
+    cdef int a
+    for a in range(3):
+        out[a, k] = o[a]
+        out[3 + a, k] = w[a]
+    out[6, k] = 0.0
+    out[7, k] = tmax
 
 
 cdef inline void cosine_direction(const float *nrm, float u1, float u2,

@@ -7,7 +7,7 @@ any-hit rays, cosine distributed around the surface normal, from every primary h
 """
 from libc.stdint cimport int32_t, uint32_t
 from raysort._rng cimport uniform
-from raysort.shaders._shading cimport leave_surface, cosine_direction
+from raysort.shaders._shading cimport leave_surface, cosine_direction, store_ray
 
 import numpy as np
 
@@ -36,27 +36,19 @@ cdef int ao_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::
                   double[:, ::1] radiance, float[:, ::1] ao_rays, int32_t[::1] ao_parent,
                   int32_t[::1] ao_slot, float[:, ::1] ao_weight) noexcept nogil:
     """Make ``samples`` AO rays per hit (misses add the background); returns how many."""
-    cdef int n = prim.shape[0], i, f, a, c, k, m = 0
-    cdef float nrm[3], o[3], w[3], ro[3], rd[3], fn[3]
+    cdef int n = prim.shape[0], i, f, c, k, m = 0
+    cdef float nrm[3], o[3], w[3]
     for i in range(n):
         f = prim[i]
         if f < 0:
             for c in range(3):
                 radiance[slot[i], c] += thr[c, i] * background
             continue
-        for a in range(3):
-            ro[a] = rays[a, i]
-            rd[a] = rays[3 + a, i]
-            fn[a] = normals[f, a]
-        leave_surface(ro, rd, t[i], fn, nrm, o)
+        leave_surface(rays, t, normals, i, f, nrm, o)
         for k in range(samples):
             cosine_direction(nrm, uniform(seed, pixel[i], sample[i], AO_DIM + 2 * k),
                              uniform(seed, pixel[i], sample[i], AO_DIM + 2 * k + 1), w)
-            for a in range(3):
-                ao_rays[a, m] = o[a]
-                ao_rays[3 + a, m] = w[a]
-            ao_rays[6, m] = 0.0
-            ao_rays[7, m] = distance
+            store_ray(ao_rays, m, o, w, distance)
             for c in range(3):
                 ao_weight[c, m] = thr[c, i] / samples
             ao_parent[m] = i

@@ -2,7 +2,7 @@
 from libc.math cimport sqrt, M_PI, INFINITY
 from libc.stdint cimport int32_t, uint32_t
 from raysort._rng cimport uniform
-from raysort.shaders._shading cimport leave_surface, cosine_direction
+from raysort.shaders._shading cimport leave_surface, cosine_direction, store_ray
 
 import numpy as np
 
@@ -37,7 +37,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                       float[:, ::1] sh_contrib, int *n_next, int *n_shadow) noexcept nogil:
     cdef int n = prim.shape[0], i, f, a, c, k = 0, m = 0, L
     cdef uint32_t dim = DIM_BASE + DIMS_PER_DEPTH * prm.depth
-    cdef float nrm[3], o[3], w[3], ro[3], rd[3], fn[3], u1, u2, q
+    cdef float nrm[3], o[3], w[3], u1, u2, q
     cdef float cosl, dist2, dist, wl[3], best
     for i in range(n):
         f = prim[i]
@@ -49,11 +49,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
             for c in range(3):
                 radiance[slot[i], c] += thr[c, i] * emission[f, c]
         # facing geometric normal and the hit point, pushed off the surface
-        for a in range(3):
-            ro[a] = rays[a, i]
-            rd[a] = rays[3 + a, i]
-            fn[a] = normals[f, a]
-        leave_surface(ro, rd, t[i], fn, nrm, o)
+        leave_surface(rays, t, normals, i, f, nrm, o)
         # next-event estimation toward point lights (shadow rays)
         for L in range(light_pos.shape[0]):
             dist2 = 0.0
@@ -67,11 +63,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                 cosl = cosl + wl[a] * nrm[a]
             if cosl <= 0 or dist2 == 0:
                 continue
-            for a in range(3):
-                sh_rays[a, m] = o[a]
-                sh_rays[3 + a, m] = wl[a]
-            sh_rays[6, m] = 0.0
-            sh_rays[7, m] = dist
+            store_ray(sh_rays, m, o, wl, dist)
             for c in range(3):
                 sh_contrib[c, m] = (thr[c, i] * albedo[f, c] * (1.0 / M_PI) * cosl
                                     * light_int[L, c] / dist2)
@@ -94,11 +86,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
         u1 = uniform(prm.seed, pixel[i], sample[i], dim)
         u2 = uniform(prm.seed, pixel[i], sample[i], dim + 1)
         cosine_direction(nrm, u1, u2, w)
-        for a in range(3):
-            next_rays[a, k] = o[a]
-            next_rays[3 + a, k] = w[a]
-        next_rays[6, k] = 0.0
-        next_rays[7, k] = INFINITY
+        store_ray(next_rays, k, o, w, INFINITY)
         for c in range(3):
             next_thr[c, k] = thr[c, i] * albedo[f, c] / q
         next_parent[k] = i
