@@ -28,7 +28,8 @@ measured on them sees what it sees inside a render.  Trace them the way the rend
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -60,21 +61,28 @@ class Workload:
                 f"packets={len(self.packets) - 1}, any_hit={self.any_hit})")
 
 
+def _lambert(shadow_rays):
+    """The lambert shader config of a render that reaches ``depth``."""
+    return lambda params: {"type": "lambert", "max_depth": params.get("depth", 0),
+                           "shadow_rays": shadow_rays}
+
+
+def _ao(params):
+    """The ao shader config, leaving unset parameters to the shader's defaults."""
+    return {"type": "ao", **{k: v for k, v in params.items() if v is not None}}
+
+
 @dataclass(frozen=True)
 class Kind:
-    """How to make one kind of workload: the shader of the render it is taken from, and
-    which traced rays to keep (closest-hit or any-hit rays, at which depth)."""
+    """How one kind of workload is made: the shader of the render it is taken from, and
+    which of the rays it traces are kept (closest-hit or any-hit rays, of which depth)."""
 
     name: str
-    params: dict        # parameter -> default (None: the shader's default)
     any_hit: bool
-
-    def shader(self, params):
-        """The render's shader config for these (checked) parameters."""
-        if self.name == "ao":
-            return {"type": "ao", **{k: v for k, v in params.items() if v is not None}}
-        return {"type": "lambert", "max_depth": params.get("depth", 0),
-                "shadow_rays": self.name == "shadow"}
+    shader: Callable                            # checked parameters -> shader config
+    params: dict = field(default_factory=dict)  # parameter -> default (None: the shader's)
+    min_depth: int = 0
+    needs_lights: bool = False
 
     def check(self, spec, scene):
         """The parameters of ``spec`` (a dict from :func:`raysort.registry.parse_spec`)
@@ -86,22 +94,20 @@ class Kind:
                               f"(it takes: {takes})")
         params = {k: spec.get(k, default) for k, default in self.params.items()}
         if "depth" in params:
-            params["depth"] = integer("depth", params["depth"], int(self.name == "diffuse"), 64)
-        if self.name == "shadow" and not scene.lights:
-            raise ConfigError(f"workload 'shadow': scene {scene.name!r} has no point lights "
-                              f"to aim shadow rays at (a scene file adds them with [[light]])")
+            params["depth"] = integer("depth", params["depth"], self.min_depth, 64)
+        if self.needs_lights and not scene.lights:
+            raise ConfigError(f"workload {self.name!r}: scene {scene.name!r} has no point "
+                              f"lights to aim shadow rays at (a scene file adds them with "
+                              f"[[light]])")
         return params
-
-    def depth(self, params):
-        return params.get("depth", 0)
 
 
 #: the workload kinds by name
 KINDS = {k.name: k for k in (
-    Kind("primary", {}, any_hit=False),
-    Kind("ao", {"samples": None, "distance": None}, any_hit=True),
-    Kind("diffuse", {"depth": 1}, any_hit=False),
-    Kind("shadow", {"depth": 0}, any_hit=True),
+    Kind("primary", False, _lambert(False)),
+    Kind("ao", True, _ao, {"samples": None, "distance": None}),
+    Kind("diffuse", False, _lambert(False), {"depth": 1}, min_depth=1),
+    Kind("shadow", True, _lambert(True), {"depth": 0}, needs_lights=True),
 )}
 
 
@@ -149,7 +155,7 @@ def _collect(scene, kind, *, width, height, spp, seed, tile, generator="pinhole"
         raise ConfigError(f"unknown workload kind {name!r}; kinds: {', '.join(KINDS)}")
     k = KINDS[name]
     params = k.check(spec, scene)
-    depth = k.depth(params)
+    depth = params.get("depth", 0)
     pipe = Pipeline(scene, generator=generator, sorter="none", shader=k.shader(params),
                     tile=tile, threads=threads)
     kept = []

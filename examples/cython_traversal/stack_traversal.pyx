@@ -45,6 +45,8 @@ class StackTraversal(Traversal):
     """
 
     def intersect(self, bvh, packets, any_hit=False):
+        # The C views of the BVH and of the gathered sub-packets, and the loop over every
+        # active lane: the scaffolding around trace_ray that every traversal needs.
         cdef const uint8_t[::1] node_bytes = bvh.nodes.view(np.uint8).reshape(-1)
         cdef const uint8_t[::1] tri_bytes = bvh.triangles.view(np.uint8).reshape(-1)
         cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
