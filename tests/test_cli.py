@@ -18,7 +18,8 @@ from raysort.cli import main
 
 BUILTINS = {("generators", "pinhole"), ("sorters", "none"), ("sorters", "nah"),
             ("sorters", "nah_numpy"), ("traversals", "single"), ("traversals", "masked"),
-            ("traversals", "ranged"), ("traversals", "partition"), ("shaders", "lambert")}
+            ("traversals", "ranged"), ("traversals", "partition"), ("shaders", "lambert"),
+            ("shaders", "ao")}
 TABLE_I = ("N_IA", "scalar N_B", "SIMD N_B", "scalar N_T", "SIMD N_T")
 TINY = ["--size", "8x6", "--spp", "1", "-q"]
 

@@ -24,7 +24,7 @@ BUILTINS = {
     "generators": {"pinhole"},
     "sorters": {"none", "nah", "nah_numpy"},
     "traversals": {"single", "masked", "ranged", "partition", "wide"},
-    "shaders": {"lambert"},
+    "shaders": {"lambert", "ao"},
 }
 
 
