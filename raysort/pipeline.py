@@ -118,15 +118,15 @@ class RenderResult:
     settings: dict
 
     def write(self, path, *, png=True, exposure=0.0):
-        """Write the EXR (and a PNG preview next to it); each file appears whole or not at all."""
+        """Write the EXR (and a PNG preview next to it, of the same render); each file appears
+        whole or not at all (see :func:`raysort.output.write_render`)."""
         from raysort import output
 
         path = os.fspath(path)
+        if not path.lower().endswith(".exr"):
+            return output.write_image(path, self.image, exposure=exposure)
         meta = {f"raysort.{k}": str(v) for k, v in self.settings.items()}
-        output.write_image(path, self.image, **({"metadata": meta} if path.lower().endswith(
-            ".exr") else {"exposure": exposure}))
-        if png and path.lower().endswith(".exr"):
-            output.write_png(os.path.splitext(path)[0] + ".png", self.image, exposure=exposure)
+        output.write_render(path, self.image, metadata=meta, exposure=exposure, png=png)
 
 
 class Pipeline:
