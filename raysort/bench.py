@@ -282,7 +282,7 @@ def add_parser(sub):
 
 def cmd_bench(args):
     from raysort import output
-    from raysort.cli import Progress
+    from raysort.progress import Progress
 
     for path in (args.json, args.chart):
         if path:

@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 
 from raysort.errors import ConfigError, RaysortError
 
@@ -40,32 +39,6 @@ def _at_least(lo):
 
 
 _positive, _non_negative = _at_least(1), _at_least(0)
-
-
-class Progress:
-    """A progress bar on stderr: redrawn in place on a terminal, a few lines otherwise."""
-
-    def __init__(self, label, stream=None, enabled=True):
-        stream = sys.stderr if stream is None else stream
-        self.label, self.stream, self.enabled = label, stream, enabled
-        self.tty = enabled and hasattr(stream, "isatty") and stream.isatty()
-        self.start = time.perf_counter()
-        self.last_decile = -1
-
-    def __call__(self, done, total):
-        if not self.enabled or total <= 0:
-            return
-        frac = done / total
-        elapsed = time.perf_counter() - self.start
-        width = 30
-        bar = "#" * int(frac * width) + "-" * (width - int(frac * width))
-        line = f"{self.label} [{bar}] {done}/{total} {elapsed:6.1f}s"
-        if self.tty:
-            self.stream.write("\r" + line + ("\n" if done == total else ""))
-        elif int(frac * 10) > self.last_decile:
-            self.last_decile = int(frac * 10)
-            self.stream.write(line + "\n")
-        self.stream.flush()
 
 
 # --------------------------------------------------------------------------
@@ -120,6 +93,7 @@ def _print_summary(result, out, stats_table, stream=None):
 def cmd_render(args):
     from raysort import output
     from raysort.pipeline import Pipeline
+    from raysort.progress import Progress
 
     out = args.output
     if not out.lower().endswith(".exr"):
@@ -132,8 +106,11 @@ def cmd_render(args):
                     traversal=args.traversal, shader=_shader_config(args), tile=args.tile,
                     threads=args.threads)
     width, height = args.size
-    progress = Progress(f"render {pipe.scene.name}", enabled=not args.quiet)
-    result = pipe.render(width, height, args.spp, args.seed, progress=progress)
+    progress = Progress(f"render {pipe.scene.name}", unit="tile", enabled=not args.quiet)
+    try:
+        result = pipe.render(width, height, args.spp, args.seed, progress=progress)
+    finally:
+        progress.close()
     result.write(out, exposure=args.exposure)
     if args.json:
         output.write_json(args.json, {"settings": result.settings,

@@ -33,6 +33,7 @@ from raysort.params import integer
 from raysort.contract import check_sort
 from raysort.errors import ConfigError, PluginContractError
 from raysort.paths import Bounce, Paths
+from raysort.progress import with_rays
 from raysort.rays import Hits, RayBatch, gather, scatter, scatter_occluded
 from raysort.scene import Scene, load_scene
 from raysort.stats import Counters
@@ -251,7 +252,8 @@ class Pipeline:
     def render(self, width=256, height=256, spp=4, seed=0, *, progress=None):
         """Render the scene's camera view; returns a :class:`RenderResult`.
 
-        ``progress(done_tiles, total_tiles)`` is called as tiles finish.
+        ``progress(done_tiles, total_tiles)`` is called as tiles finish, with
+        ``rays=`` the rays traced so far if it takes a ``rays`` argument.
         """
         width, height = integer("width", width, 1), integer("height", height, 1)
         spp, seed = integer("spp", spp, 1), integer("seed", seed, 0)
@@ -261,6 +263,7 @@ class Pipeline:
         tiles = [(x, y) for y in range(0, height, self.tile) for x in range(0, width, self.tile)]
         image = np.zeros((height, width, 3), dtype=np.float32)
         stats = RenderStats(threads=self.threads)
+        progress = with_rays(progress, lambda: stats.total_rays)
 
         def finish(tile, result):
             radiance, tile_stats = result
