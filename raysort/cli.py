@@ -56,7 +56,7 @@ def _shader_config(args):
     return config
 
 
-def _print_summary(result, out, stats_table, stream=None):
+def _print_summary(result, out, stats_table, stream=None, created=()):
     from raysort.stats import COUNTER_LABELS
 
     stream = sys.stdout if stream is None else stream
@@ -87,7 +87,8 @@ def _print_summary(result, out, stats_table, stream=None):
                 print("    " + label.ljust(8) + "".join(f"{per[k]:12.2f}" for k in
                                                         COUNTER_LABELS), file=stream)
     if out:
-        print(f"  wrote {out} and {os.path.splitext(out)[0] + '.png'}", file=stream)
+        made = "".join(f" (created directory {d})" for d in created)
+        print(f"  wrote {out} and {os.path.splitext(out)[0] + '.png'}{made}", file=stream)
 
 
 def cmd_render(args):
@@ -101,7 +102,7 @@ def cmd_render(args):
                           f"to it), got {out!r}")
     for path in (out, os.path.splitext(out)[0] + ".png", args.json):
         if path:
-            output.check_writable(path)
+            output.check_writable(path, parents=True)
     pipe = Pipeline(args.scene, generator=args.generator, sorter=args.sorter,
                     traversal=args.traversal, shader=_shader_config(args), tile=args.tile,
                     threads=args.threads)
@@ -111,11 +112,12 @@ def cmd_render(args):
         result = pipe.render(width, height, args.spp, args.seed, progress=progress)
     finally:
         progress.close()
+    created = [d for d in (output.make_parents(p) for p in (out, args.json) if p) if d]
     result.write(out, exposure=args.exposure)
     if args.json:
         output.write_json(args.json, {"settings": result.settings,
                                       "stats": result.stats.as_dict()})
-    _print_summary(result, out, args.stats)
+    _print_summary(result, out, args.stats, created=created)
     return 0
 
 
@@ -140,11 +142,27 @@ def cmd_plugins(args):
 
 
 def cmd_scenes(args):
-    from raysort.scene import scene_names
+    """Each packaged scene: name, triangles and its file's one-line description (the
+    meshes are read, no BVH is built)."""
+    from importlib.resources import files
 
+    from raysort.scene import load_scene, scene_names, tomllib
+
+    rows = [("name", "triangles", "description")]
     for name in scene_names():
-        print(name)
+        doc = tomllib.loads((files("raysort.scenes") / f"{name}.toml").read_text("utf-8"))
+        rows.append((name, f"{load_scene(name).n_triangles:,}", doc.get("description", "")))
+    width = max(len(r[0]) for r in rows), max(len(r[1]) for r in rows)
+    for name, triangles, description in rows:
+        print(f"{name:<{width[0]}}  {triangles:>{width[1]}}  {description}")
     return 0
+
+
+def _usable_cores():
+    """CPU cores this process may run on (its affinity mask where the OS has one)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 # --------------------------------------------------------------------------
@@ -169,10 +187,12 @@ def build_parser():
     r.add_argument("--shader", default="lambert", help="shader name or spec (lambert)")
     r.add_argument("--shadow-rays", choices=("on", "off"), default=None,
                    help="shadow rays to the scene's point lights (default: on if it has any)")
-    r.add_argument("--threads", type=_positive, default=1, help="worker threads (1)")
+    r.add_argument("--threads", type=_positive, default=_usable_cores(),
+                   help="worker threads (default: the usable cores, %(default)s here)")
     r.add_argument("--tile", type=_positive, default=32, help="tile edge in pixels (32)")
     r.add_argument("--exposure", type=float, default=0.0, help="PNG exposure in stops (0)")
-    r.add_argument("-o", "--output", default="render.exr", help="output .exr (render.exr)")
+    r.add_argument("-o", "--output", default="render.exr",
+                   help="output .exr; missing directories are created (render.exr)")
     r.add_argument("--stats", action="store_true", help="print the Table I counters")
     r.add_argument("--json", default=None, help="also write settings and stats as JSON")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
@@ -181,7 +201,7 @@ def build_parser():
     p = sub.add_parser("plugins", help="list every plugin and the SIMD path")
     p.set_defaults(func=cmd_plugins)
 
-    s = sub.add_parser("scenes", help="list the packaged scenes")
+    s = sub.add_parser("scenes", help="list the packaged scenes: name, triangles, description")
     s.set_defaults(func=cmd_scenes)
 
     from raysort.bench import add_parser as add_bench_parser
