@@ -33,6 +33,7 @@ from raysort.bvh import BVH  # noqa: E402 (after the check above)
 from raysort.camera import Camera
 from raysort.errors import (ConfigError, OutputError, PluginContractError, PluginError,
                             PluginLoadError, RaysortError, SceneError, UnknownPluginError)
+from raysort.meshtrace import trace
 from raysort.paths import Bounce, Paths, ShadowRays
 from raysort.pipeline import Pipeline, RenderResult, RenderStats
 from raysort.plugin import Generator, Shader, Sorter, Traversal
@@ -48,6 +49,7 @@ __all__ = [
     "unregister", "create", "load", "available", "list_plugins", "refresh", "get_include",
     "RaysortError", "ConfigError", "SceneError", "OutputError", "PluginError",
     "UnknownPluginError", "PluginLoadError", "PluginContractError",
+    "trace",
 ]
 
 
