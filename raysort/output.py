@@ -46,6 +46,7 @@ __all__ = [
     "write_exr",
     "read_exr",
     "write_png",
+    "png_bytes",
     "read_png",
     "check_writable",
     "make_parents",
@@ -605,6 +606,13 @@ def write_png(path, image, *, exposure=0.0, text=None):
     picture = _png_picture(_rgb(image), _check_exposure(exposure))
     with atomic_target(path) as tmp:
         _write_picture(picture, tmp, text)
+
+
+def png_bytes(image, *, exposure=0.0):
+    """The tone-mapped 8-bit sRGB PNG of a linear image, as bytes (e.g. for Jupyter)."""
+    buffer = io.BytesIO()
+    _write_picture(_png_picture(_rgb(image), _check_exposure(exposure)), buffer, None)
+    return buffer.getvalue()
 
 
 def read_png(path):

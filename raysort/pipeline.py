@@ -95,6 +95,42 @@ class RenderStats:
             total = total + c
         return total
 
+    def stage_shares(self):
+        """Each stage's share of the summed stage seconds (0..1), largest first."""
+        total = sum(self.stage_seconds.values()) or 1.0
+        return dict(sorted(((k, v / total) for k, v in self.stage_seconds.items() if v > 0),
+                           key=lambda item: -item[1]))
+
+    def _summary(self):
+        """(label, text) rows shared by the text and HTML views."""
+        from raysort.stats import COUNTER_LABELS
+
+        depths = ", ".join(f"depth {d}: {n:,}" for d, n in sorted(self.rays.items()))
+        per_ray = self.closest_hit_counters().per_ray()
+        counters = ("not counted by this traversal" if None in per_ray.values() else
+                    ", ".join(f"{COUNTER_LABELS[k]} {v:.2f}" for k, v in per_ray.items()))
+        return [
+            ("time", f"{self.wall_seconds:.3f} s wall, {self.threads} "
+                     f"thread{'s' if self.threads != 1 else ''}"),
+            ("throughput", f"{self.mrays_per_second:.3f} Mrays/s"),
+            ("rays", f"{self.total_rays:,} ({depths}; shadow: {self.shadow_rays:,})"),
+            ("stages", ", ".join(f"{k} {share:.0%}" for k, share in
+                                 self.stage_shares().items()) or "none"),
+            ("work per ray", counters),
+        ]
+
+    def __repr__(self):
+        rows = "\n".join(f"  {label + ':':<14}{text}" for label, text in self._summary())
+        return f"RenderStats(\n{rows}\n)"
+
+    def _repr_html_(self):
+        from html import escape
+
+        rows = "".join(f"<tr><th style='text-align:left'>{escape(label)}</th>"
+                       f"<td style='text-align:left'>{escape(text)}</td></tr>"
+                       for label, text in self._summary())
+        return f"<table><caption>RenderStats</caption>{rows}</table>"
+
     def as_dict(self):
         return {
             "wall_seconds": self.wall_seconds,
@@ -117,6 +153,19 @@ class RenderResult:
     image: np.ndarray
     stats: RenderStats
     settings: dict
+
+    def __repr__(self):
+        s = self.settings
+        return (f"RenderResult({s.get('scene')}, {s.get('width')}x{s.get('height')}, "
+                f"{s.get('spp')} spp, sorter {s.get('sorter')}, traversal "
+                f"{s.get('traversal')}: {self.stats.wall_seconds:.3f} s, "
+                f"{self.stats.mrays_per_second:.3f} Mrays/s)")
+
+    def _repr_png_(self):
+        """Jupyter shows the image, tone mapped as the PNG preview is (exposure 0)."""
+        from raysort import output
+
+        return output.png_bytes(self.image)
 
     def write(self, path, *, png=True, exposure=0.0):
         """Write the EXR (and a PNG preview next to it, of the same render); each file appears
