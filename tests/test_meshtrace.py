@@ -114,3 +114,22 @@ def test_threads_share_one_bvh_build(sponza, rng, monkeypatch):
     ref = brute_force(sponza.vertices, sponza.faces, rays)
     for hits in results:
         assert_same_hits(hits, ref)
+
+
+def test_outside_sorters_are_still_checked():
+    """trace skips the contract check for raysort's trusted sorters only: a sorter from
+    elsewhere that returns a non-permutation is caught and named."""
+    from raysort.errors import PluginContractError
+    from raysort.sdk import Sorter, fixed_packets
+
+    class Duplicating(Sorter):
+        def sort(self, rays, packets, bounds):
+            return np.zeros(len(rays), np.int32), fixed_packets(packets, 64)
+
+    raysort.register("sorters", "duplicating_for_test", Duplicating)
+    try:
+        with pytest.raises(PluginContractError, match="duplicating_for_test"):
+            raysort.trace([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], [[0, 0, 1]] * 4,
+                          [[0, 0, -1]] * 4, sorter="duplicating_for_test")
+    finally:
+        raysort.unregister("sorters", "duplicating_for_test")
