@@ -15,7 +15,8 @@ directory which is then renamed onto the target, so a failure or an interrupt
 never leaves a half-written file and never damages an existing one.
 :func:`write_render` writes an EXR and its PNG preview as one pair: both
 temporaries are written first, then renamed in a fixed order while holding a
-lock on the directory, and both carry the same ``raysort.render_id``, so two
+lock on the directory, and both carry the same ``raysort.render_id`` (a digest
+of pixels, metadata and exposure), so two
 processes writing the same path never leave one's EXR next to the other's PNG.
 Problems with the output path raise :class:`~raysort.errors.OutputError`
 with a one-line message; :func:`check_writable` performs the same checks up
@@ -26,10 +27,10 @@ The readers :func:`read_exr` and :func:`read_png` exist for tests and tools.
 """
 
 import contextlib
+import hashlib
 import io
 import os
 import tempfile
-import uuid
 
 import numpy as np
 
@@ -657,7 +658,8 @@ def write_render(path, image, *, metadata=None, exposure=0.0, png=True):
     renames then happen, EXR first, while this process holds a lock on the
     directory, so concurrent writers of the same path leave the EXR and PNG
     of one render.  Both files record the same ``raysort.render_id`` (an
-    EXR header attribute and a PNG text chunk).
+    EXR header attribute and a PNG text chunk): a digest of the pixels, the
+    metadata and the exposure, so the same render always gives the same bytes.
 
     Parameters
     ----------
@@ -687,11 +689,13 @@ def write_render(path, image, *, metadata=None, exposure=0.0, png=True):
     path = os.fspath(path)
     if os.path.splitext(path)[1].lower() != ".exr":
         raise OutputError(f"cannot write {_q(path)}: a render is written to an .exr file")
-    render_id = uuid.uuid4().hex
+    image, exposure, metadata = _as_rgb_float32(image), _check_exposure(exposure), metadata or {}
+    _check_metadata(metadata)
+    render_id = _render_id(image, metadata, exposure if png else None)
     stamp = {"raysort.render_id": render_id}
-    exr = _prepared_exr(image, dict(metadata or {}, **stamp))
+    exr = _prepared_exr(image, dict(metadata, **stamp))
     png_path = os.path.splitext(path)[0] + ".png"
-    picture = _png_picture(_rgb(image), _check_exposure(exposure)) if png else None
+    picture = _png_picture(image, exposure) if png else None
     with contextlib.ExitStack() as temporaries:
         renames = [(temporaries.enter_context(_temporary(path)), path)]
         _write_exr_file(exr, renames[0][0], path)
@@ -706,6 +710,18 @@ def write_render(path, image, *, metadata=None, exposure=0.0, png=True):
     with contextlib.suppress(OSError):
         _fsync(os.path.dirname(path) or os.curdir)
     return render_id
+
+
+def _render_id(image, metadata, exposure):
+    """A digest of what the pair shows: pixels, metadata and the preview's exposure.
+
+    Identical renders get identical ids (so their files stay byte-identical);
+    any difference in pixels, settings or exposure gives another id.
+    """
+    digest = hashlib.blake2b(digest_size=16)
+    digest.update(repr((image.shape, sorted(metadata.items()), exposure)).encode())
+    digest.update(memoryview(image).cast("B"))
+    return digest.hexdigest()
 
 
 # --------------------------------------------------------------------------

@@ -325,7 +325,18 @@ def test_write_render_pair_shares_a_render_id(tmp_path):
     assert text == {"raysort.render_id": render_id}
     assert (pixels == 255).all()                           # 0.5 at +1 EV
     np.testing.assert_array_equal(output.read_exr(target), image)
-    assert output.write_render(target, image) != render_id   # a new id per render
+    before = target.read_bytes(), (tmp_path / "r.png").read_bytes()
+    assert output.write_render(target, image, metadata={"raysort.scene": "x"},
+                               exposure=1.0) == render_id     # the same render: same bytes
+    assert (target.read_bytes(), (tmp_path / "r.png").read_bytes()) == before
+    changed = image.copy()
+    changed[3, 4, 2] = np.nextafter(np.float32(0.5), np.float32(1))
+    for other in (output.write_render(target, changed, metadata={"raysort.scene": "x"},
+                                      exposure=1.0),
+                  output.write_render(target, image, metadata={"raysort.scene": "y"},
+                                      exposure=1.0),
+                  output.write_render(target, image, metadata={"raysort.scene": "x"})):
+        assert other != render_id
     output.write_render(tmp_path / "only.EXR", image, png=False)
     assert _listdir(tmp_path) == ["only.EXR", "r.exr", "r.png"]
 
