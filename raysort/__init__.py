@@ -11,10 +11,29 @@ plugins found through entry points, with Cython + SSE kernels.  Start with
 """
 from pathlib import Path
 
-from raysort.bvh import BVH
+
+def _require_compiled():
+    """Fail clearly when Python imports the uncompiled source tree (``python -c "import
+    raysort"`` from a checkout) instead of the installed package."""
+    from importlib.machinery import EXTENSION_SUFFIXES
+
+    here = Path(__file__).parent
+    if not (here.parent / "setup.py").is_file():
+        return                                   # an installed package
+    if not any(any(here.rglob("*" + suffix)) for suffix in EXTENSION_SUFFIXES):
+        raise ImportError(
+            f"this is raysort's source tree ({here}), which has no compiled extensions: "
+            f"install raysort with `pip install .` and run Python from another directory "
+            f"(or build in place with `pip install -e .`)")
+
+
+_require_compiled()
+
+from raysort.bvh import BVH  # noqa: E402 (after the check above)
 from raysort.camera import Camera
 from raysort.errors import (ConfigError, OutputError, PluginContractError, PluginError,
                             PluginLoadError, RaysortError, SceneError, UnknownPluginError)
+from raysort.meshtrace import trace
 from raysort.paths import Bounce, Paths, ShadowRays
 from raysort.pipeline import Pipeline, RenderResult, RenderStats
 from raysort.plugin import Generator, Shader, Sorter, Traversal
@@ -30,6 +49,7 @@ __all__ = [
     "unregister", "create", "load", "available", "list_plugins", "refresh", "get_include",
     "RaysortError", "ConfigError", "SceneError", "OutputError", "PluginError",
     "UnknownPluginError", "PluginLoadError", "PluginContractError",
+    "trace",
 ]
 
 

@@ -260,7 +260,7 @@ def add_parser(sub):
     from raysort.cli import _non_negative, _positive, _size
 
     b = sub.add_parser("bench", help="reproduce the paper's Fig. 2 and Table I",
-                       description=__doc__.split("\n\n")[0])
+                       description=__doc__.split("\n\n")[0].replace("``", ""))
     b.add_argument("scenes", nargs="*", help=f"scenes (default: {' '.join(PAPER_SCENES)})")
     b.add_argument("--size", type=_size, default=(256, 256), help="WIDTHxHEIGHT (256x256)")
     b.add_argument("--spp", type=_positive, default=4, help="samples per pixel (4)")
@@ -282,7 +282,7 @@ def add_parser(sub):
 
 def cmd_bench(args):
     from raysort import output
-    from raysort.cli import Progress
+    from raysort.progress import Progress
 
     for path in (args.json, args.chart):
         if path:

@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 
 from raysort.errors import ConfigError, RaysortError
 
@@ -52,32 +51,6 @@ def _aov_names(text):
         raise argparse.ArgumentTypeError(str(exc))
 
 
-class Progress:
-    """A progress bar on stderr: redrawn in place on a terminal, a few lines otherwise."""
-
-    def __init__(self, label, stream=None, enabled=True):
-        stream = sys.stderr if stream is None else stream
-        self.label, self.stream, self.enabled = label, stream, enabled
-        self.tty = enabled and hasattr(stream, "isatty") and stream.isatty()
-        self.start = time.perf_counter()
-        self.last_decile = -1
-
-    def __call__(self, done, total):
-        if not self.enabled or total <= 0:
-            return
-        frac = done / total
-        elapsed = time.perf_counter() - self.start
-        width = 30
-        bar = "#" * int(frac * width) + "-" * (width - int(frac * width))
-        line = f"{self.label} [{bar}] {done}/{total} {elapsed:6.1f}s"
-        if self.tty:
-            self.stream.write("\r" + line + ("\n" if done == total else ""))
-        elif int(frac * 10) > self.last_decile:
-            self.last_decile = int(frac * 10)
-            self.stream.write(line + "\n")
-        self.stream.flush()
-
-
 # --------------------------------------------------------------------------
 # render
 # --------------------------------------------------------------------------
@@ -93,7 +66,7 @@ def _shader_config(args):
     return config
 
 
-def _print_summary(result, out, stats_table, stream=None):
+def _print_summary(result, out, stats_table, stream=None, created=()):
     from raysort.stats import COUNTER_LABELS
 
     stream = sys.stdout if stream is None else stream
@@ -125,12 +98,15 @@ def _print_summary(result, out, stats_table, stream=None):
                                                         COUNTER_LABELS), file=stream)
     if out:
         layers = f" (AOV layers: {', '.join(result.aov)})" if result.aov else ""
-        print(f"  wrote {out}{layers} and {os.path.splitext(out)[0] + '.png'}", file=stream)
+        made = "".join(f" (created directory {d})" for d in created)
+        print(f"  wrote {out}{layers} and {os.path.splitext(out)[0] + '.png'}{made}",
+              file=stream)
 
 
 def cmd_render(args):
     from raysort import output
     from raysort.pipeline import Pipeline
+    from raysort.progress import Progress
 
     out = args.output
     if not out.lower().endswith(".exr"):
@@ -138,18 +114,23 @@ def cmd_render(args):
                           f"to it), got {out!r}")
     for path in (out, os.path.splitext(out)[0] + ".png", args.json):
         if path:
-            output.check_writable(path)
+            output.check_writable(path, parents=True)
     pipe = Pipeline(args.scene, generator=args.generator, sorter=args.sorter,
                     traversal=args.traversal, shader=_shader_config(args), tile=args.tile,
                     threads=args.threads)
     width, height = args.size
-    progress = Progress(f"render {pipe.scene.name}", enabled=not args.quiet)
-    result = pipe.render(width, height, args.spp, args.seed, progress=progress, aov=args.aov)
+    progress = Progress(f"render {pipe.scene.name}", unit="tile", enabled=not args.quiet)
+    try:
+        result = pipe.render(width, height, args.spp, args.seed, progress=progress,
+                             aov=args.aov)
+    finally:
+        progress.close()
+    created = [d for d in (output.make_parents(p) for p in (out, args.json) if p) if d]
     result.write(out, exposure=args.exposure)
     if args.json:
         output.write_json(args.json, {"settings": result.settings,
                                       "stats": result.stats.as_dict()})
-    _print_summary(result, out, args.stats)
+    _print_summary(result, out, args.stats, created=created)
     return 0
 
 
@@ -174,11 +155,27 @@ def cmd_plugins(args):
 
 
 def cmd_scenes(args):
-    from raysort.scene import scene_names
+    """Each packaged scene: name, triangles and its file's one-line description (the
+    meshes are read, no BVH is built)."""
+    from importlib.resources import files
 
+    from raysort.scene import load_scene, scene_names, tomllib
+
+    rows = [("name", "triangles", "description")]
     for name in scene_names():
-        print(name)
+        doc = tomllib.loads((files("raysort.scenes") / f"{name}.toml").read_text("utf-8"))
+        rows.append((name, f"{load_scene(name).n_triangles:,}", doc.get("description", "")))
+    width = max(len(r[0]) for r in rows), max(len(r[1]) for r in rows)
+    for name, triangles, description in rows:
+        print(f"{name:<{width[0]}}  {triangles:>{width[1]}}  {description}")
     return 0
+
+
+def _usable_cores():
+    """CPU cores this process may run on (its affinity mask where the OS has one)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 # --------------------------------------------------------------------------
@@ -203,10 +200,12 @@ def build_parser():
     r.add_argument("--shader", default="lambert", help="shader name or spec (lambert)")
     r.add_argument("--shadow-rays", choices=("on", "off"), default=None,
                    help="shadow rays to the scene's point lights (default: on if it has any)")
-    r.add_argument("--threads", type=_positive, default=1, help="worker threads (1)")
+    r.add_argument("--threads", type=_positive, default=_usable_cores(),
+                   help="worker threads (default: the usable cores, %(default)s here)")
     r.add_argument("--tile", type=_positive, default=32, help="tile edge in pixels (32)")
     r.add_argument("--exposure", type=float, default=0.0, help="PNG exposure in stops (0)")
-    r.add_argument("-o", "--output", default="render.exr", help="output .exr (render.exr)")
+    r.add_argument("-o", "--output", default="render.exr",
+                   help="output .exr; missing directories are created (render.exr)")
     r.add_argument("--aov", type=_aov_names, default=[], metavar="LAYERS",
                    help="extra EXR layers from each pixel's first primary hit, comma-separated: "
                         "depth, normal, albedo, prim")
@@ -218,7 +217,7 @@ def build_parser():
     p = sub.add_parser("plugins", help="list every plugin and the SIMD path")
     p.set_defaults(func=cmd_plugins)
 
-    s = sub.add_parser("scenes", help="list the packaged scenes")
+    s = sub.add_parser("scenes", help="list the packaged scenes: name, triangles, description")
     s.set_defaults(func=cmd_scenes)
 
     from raysort.bench import add_parser as add_bench_parser

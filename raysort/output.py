@@ -6,38 +6,52 @@ Two formats are supported:
   ``B``, scanline, ZIP compression, written with the ``OpenEXR`` package
   (>= 3.3, the ``OpenEXR.File`` API).  Values are stored bit-exactly.
 * PNG (``.png``): an 8-bit sRGB preview, tone mapped by exposure, clamping and
-  the sRGB transfer function, encoded by hand with :mod:`zlib` and
-  :mod:`struct` (no image library needed).
+  the sRGB transfer function, encoded with Pillow.  Tone mapping runs over
+  blocks of rows, so writing a preview needs little more memory than Pillow's
+  own copy of the 8-bit picture.
 
-Both writers are atomic: the image goes to a temporary file in the target's
+Every writer is atomic: the image goes to a temporary file in the target's
 directory which is then renamed onto the target, so a failure or an interrupt
-never leaves a half-written file and never damages an existing one.  Problems
-with the output path raise :class:`~raysort.errors.OutputError` with a
-one-line message; :func:`check_writable` performs the same checks up front, so
-a renderer can fail before it spends minutes rendering.
+never leaves a half-written file and never damages an existing one.
+:func:`write_render` writes an EXR and its PNG preview as one pair: both
+temporaries are written first, then renamed in a fixed order while holding a
+lock on the directory, and both carry the same ``raysort.render_id`` (a digest
+of pixels, metadata and exposure), so two
+processes writing the same path never leave one's EXR next to the other's PNG.
+Problems with the output path raise :class:`~raysort.errors.OutputError`
+with a one-line message; :func:`check_writable` performs the same checks up
+front (it creates and removes a probe file), so a renderer can fail before it
+spends minutes rendering.
 
 The readers :func:`read_exr` and :func:`read_png` exist for tests and tools.
 """
 
 import contextlib
+import hashlib
 import io
 import os
-import struct
 import tempfile
-import zlib
 
 import numpy as np
 
 from raysort.errors import OutputError
 
+try:
+    import fcntl
+except ImportError:  # Windows: pairs are renamed without a lock
+    fcntl = None
+
 __all__ = [
     "write_image",
+    "write_render",
     "write_exr",
     "read_exr",
     "read_exr_channels",
     "write_png",
+    "png_bytes",
     "read_png",
     "check_writable",
+    "make_parents",
     "atomic_target",
     "write_json",
     "tone_map",
@@ -48,7 +62,9 @@ SUPPORTED_SUFFIXES = (".exr", ".png")
 
 _EXR_MAGIC = b"\x76\x2f\x31\x01"
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-_IDAT_SIZE = 1 << 20  # bytes of compressed data per IDAT chunk
+#: float32 values tone mapped per block: a block's float64 temporaries stay a
+#: few MiB whatever the image size
+_TONE_MAP_BLOCK = 1 << 18
 
 # Header attributes that describe the file's structure; metadata must not
 # replace them.
@@ -69,8 +85,13 @@ def _q(path):
     return repr(os.fspath(path))
 
 
-def _path_problem(path):
-    """Return why `path` cannot be written, or None if it looks writable."""
+def _path_problem(path, parents=False, probe=True):
+    """Return why `path` cannot be written, or None if it looks writable.
+
+    With `parents`, a missing parent directory is no problem as long as its
+    deepest existing ancestor is a directory.  With `probe`, a file is
+    created and removed in the directory to be sure.
+    """
     path = os.fspath(path)
     if not path:
         return "the path is empty"
@@ -81,43 +102,104 @@ def _path_problem(path):
         blocker = _first_non_directory(parent)
         if blocker is not None:
             return f"{_q(blocker)} is not a directory"
-        return f"directory {_q(parent)} does not exist"
+        if not parents:
+            return f"directory {_q(parent)} does not exist"
+        parent = _deepest_existing(parent)
     if not os.path.isdir(parent):
         return f"{_q(parent)} is not a directory"
     if not os.access(parent, os.W_OK | os.X_OK):
         return f"directory {_q(parent)} is not writable"
-    return None
+    return _probe(parent, os.path.basename(path)) if probe else None
+
+
+def _deepest_existing(path):
+    """The deepest ancestor of `path` (or `path` itself) that exists."""
+    while path and not os.path.exists(path):
+        head = os.path.dirname(path)
+        if head == path:
+            break
+        path = head
+    return path or os.curdir
 
 
 def _first_non_directory(path):
     """Return the deepest existing ancestor of `path` if it is not a directory."""
-    while path and not os.path.exists(path):
-        head = os.path.dirname(path)
-        if head == path:
-            return None
-        path = head
-    if path and not os.path.isdir(path):
+    path = _deepest_existing(path)
+    if os.path.exists(path) and not os.path.isdir(path):
         return path
     return None
 
 
-def check_writable(path):
-    """Check that an image can be written to `path`, without creating anything.
+def _probe(directory, name):
+    """Create and remove a file in `directory`; return why that fails, or None.
+
+    Permission bits do not tell everything: root may write anywhere they say
+    no, and file systems such as /proc or a read-only mount refuse whatever
+    they say.
+    """
+    try:
+        fd, probe = tempfile.mkstemp(dir=directory, prefix="." + name + ".",
+                                     suffix=".probe")
+    except OSError as exc:
+        return f"cannot create a file in {_q(directory)}: {exc.strerror or exc}"
+    os.close(fd)
+    with contextlib.suppress(OSError):
+        os.unlink(probe)
+    return None
+
+
+def check_writable(path, *, parents=False):
+    """Check that an image can be written to `path`, leaving nothing behind.
+
+    A probe file is created and removed in the target directory, so a
+    directory that only looks writable (``/proc``, a read-only mount) fails
+    here rather than after a render.
 
     Parameters
     ----------
     path : str or os.PathLike
         The output file.
+    parents : bool
+        Accept a missing parent directory if it can be created (see
+        :func:`make_parents`); the probe then runs in its deepest existing
+        ancestor.
 
     Raises
     ------
     OutputError
-        If the parent directory is missing, is not a directory or is not
-        writable, or if `path` is a directory.
+        If the parent directory is missing (unless `parents`), is not a
+        directory or is not writable, or if `path` is a directory.
     """
-    problem = _path_problem(path)
+    problem = _path_problem(path, parents)
     if problem is not None:
         raise OutputError(f"cannot write {_q(path)}: {problem}")
+
+
+def make_parents(path):
+    """Create the missing parent directories of `path`.
+
+    Returns
+    -------
+    str or None
+        The outermost directory created, or None if the parent existed.
+
+    Raises
+    ------
+    OutputError
+        If a directory cannot be created.
+    """
+    parent = os.path.dirname(os.fspath(path))
+    if not parent or os.path.isdir(parent):
+        return None
+    created = parent
+    while os.path.dirname(created) and not os.path.exists(os.path.dirname(created)):
+        created = os.path.dirname(created)
+    try:
+        os.makedirs(parent, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot write {_q(path)}: cannot create directory "
+                          f"{_q(parent)}: {exc.strerror or exc}") from exc
+    return created
 
 
 def _file_mode():
@@ -143,6 +225,69 @@ def _fsync(path):
         os.close(fd)
 
 
+def _os_error(path, exc):
+    return OutputError(f"cannot write {_q(path)}: {exc.strerror or exc}")
+
+
+@contextlib.contextmanager
+def _temporary(path):
+    """Yield a complete, flushed temporary file next to `path` (see atomic_target).
+
+    The body writes the file; afterwards it gets the usual permission bits
+    and is flushed to disk.  It is removed if anything raises, including
+    after the body (the caller renames it).
+    """
+    problem = _path_problem(path, probe=False)  # mkstemp below is the probe
+    if problem is not None:
+        raise OutputError(f"cannot write {_q(path)}: {problem}")
+    path = os.fspath(path)
+    directory, name = os.path.split(path)
+    try:
+        fd, tmp = tempfile.mkstemp(dir=directory or os.curdir,
+                                   prefix="." + name + ".", suffix=".tmp")
+    except OSError as exc:
+        raise _os_error(path, exc) from exc
+    try:
+        os.close(fd)
+        yield tmp
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        if isinstance(exc, OSError):
+            raise _os_error(path, exc) from exc
+        raise
+
+
+def _finish(tmp, path):
+    """Give the temporary file its final mode and flush it to disk."""
+    try:
+        os.chmod(tmp, _file_mode())
+        _fsync(tmp)
+    except OSError as exc:
+        raise _os_error(path, exc) from exc
+
+
+def _rename(tmp, path):
+    try:
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise _os_error(path, exc) from exc
+
+
+@contextlib.contextmanager
+def _directory_lock(directory):
+    """Hold an exclusive advisory lock on `directory` (no lock file is left)."""
+    if fcntl is None:
+        yield
+        return
+    fd = os.open(directory or os.curdir, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # closing releases the lock
+
+
 @contextlib.contextmanager
 def atomic_target(path):
     """Yield a temporary file name next to `path`; rename it onto `path` on success.
@@ -166,38 +311,20 @@ def atomic_target(path):
     OutputError
         If `path` cannot be written or an operating-system call fails.
     """
-    check_writable(path)
-    path = os.fspath(path)
-    directory, name = os.path.split(path)
-    try:
-        fd, tmp = tempfile.mkstemp(dir=directory or os.curdir,
-                                   prefix="." + name + ".", suffix=".tmp")
-    except OSError as exc:
-        raise OutputError(
-            f"cannot write {_q(path)}: {exc.strerror or exc}") from exc
-    try:
-        os.close(fd)
+    with _temporary(path) as tmp:
         yield tmp
-        os.chmod(tmp, _file_mode())
-        _fsync(tmp)
-        os.replace(tmp, path)
-    except BaseException as exc:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        if isinstance(exc, OSError):
-            raise OutputError(
-                f"cannot write {_q(path)}: {exc.strerror or exc}") from exc
-        raise
+        _finish(tmp, path)
+        _rename(tmp, path)
     with contextlib.suppress(OSError):
-        _fsync(directory or os.curdir)
+        _fsync(os.path.dirname(os.fspath(path)) or os.curdir)
 
 
 # --------------------------------------------------------------------------
 # Image validation
 # --------------------------------------------------------------------------
 
-def _as_rgb_float32(image):
-    """Return `image` as a C-contiguous float32 (H, W, 3) array.
+def _rgb(image):
+    """Return `image` as an array after checking it is a float (H, W, 3) image.
 
     Raises
     ------
@@ -211,7 +338,12 @@ def _as_rgb_float32(image):
     if image.dtype not in (np.float32, np.float64):
         raise ValueError(f"image must be float32 or float64, got {image.dtype} "
                          f"(shape {image.shape})")
-    return np.ascontiguousarray(image, dtype=np.float32)
+    return image
+
+
+def _as_rgb_float32(image):
+    """Return `image` as a checked, C-contiguous float32 (H, W, 3) array."""
+    return np.ascontiguousarray(_rgb(image), dtype=np.float32)
 
 
 # --------------------------------------------------------------------------
@@ -324,12 +456,18 @@ def write_exr(path, image, *, metadata=None, channels=None):
     OutputError
         If the file cannot be written.
     """
+    exr = _prepared_exr(image, metadata, channels)
+    with atomic_target(path) as tmp:
+        _write_exr_file(exr, tmp, path)
+
+
+def _prepared_exr(image, metadata, channels=None):
+    """An OpenEXR.File of `image` with `metadata` and extra `channels`, checked before
+    any file exists."""
     image = _as_rgb_float32(image)
     extra = _check_channels(channels or {}, image.shape[:2])
     OpenEXR = _openexr()
-    exr = _exr_file(OpenEXR, image, _exr_header(OpenEXR, metadata), extra)
-    with atomic_target(path) as tmp:
-        _write_exr_file(exr, tmp, path)
+    return _exr_file(OpenEXR, image, _exr_header(OpenEXR, metadata), extra)
 
 
 def _write_exr_file(exr, tmp, path):
@@ -411,11 +549,20 @@ def _srgb_encode(linear):
                     1.055 * np.power(linear, 1.0 / 2.4) - 0.055)
 
 
+def _check_exposure(exposure):
+    exposure = float(exposure)
+    if not np.isfinite(exposure):
+        raise ValueError(f"exposure must be finite, got {exposure}")
+    return exposure
+
+
 def tone_map(image, exposure=0.0):
     """Map linear RGB to 8-bit sRGB.
 
     Multiplies by ``2**exposure``, clamps to [0, 1] (NaN becomes 0), applies
-    the sRGB transfer function and rounds to the nearest integer.
+    the sRGB transfer function and rounds to the nearest integer.  The float64
+    arithmetic runs over blocks of values, so memory beyond the result stays
+    a few MiB whatever the size of `image`.
 
     Parameters
     ----------
@@ -429,40 +576,54 @@ def tone_map(image, exposure=0.0):
     numpy.ndarray
         uint8 array of the same shape.
     """
-    exposure = float(exposure)
-    if not np.isfinite(exposure):
-        raise ValueError(f"exposure must be finite, got {exposure}")
-    linear = np.asarray(image, dtype=np.float64) * 2.0 ** exposure
-    linear = np.clip(np.nan_to_num(linear, nan=0.0), 0.0, 1.0)
-    return np.rint(_srgb_encode(linear) * 255.0).astype(np.uint8)
+    scale = 2.0 ** _check_exposure(exposure)
+    image = np.asarray(image)
+    flat = image.reshape(-1)  # a view when `image` is contiguous
+    out = np.empty(flat.shape, dtype=np.uint8)
+    for start in range(0, len(flat), _TONE_MAP_BLOCK):
+        block = flat[start:start + _TONE_MAP_BLOCK].astype(np.float64) * scale
+        block = np.clip(np.nan_to_num(block, nan=0.0), 0.0, 1.0)
+        out[start:start + _TONE_MAP_BLOCK] = np.rint(_srgb_encode(block) * 255.0)
+    return out.reshape(image.shape)
 
 
-def _png_chunk(kind, data):
-    """Return one PNG chunk: length, type, data and CRC."""
-    return (struct.pack(">I", len(data)) + kind + data
-            + struct.pack(">I", zlib.crc32(kind + data)))
+def _pillow():
+    from PIL import Image, PngImagePlugin
+
+    return Image, PngImagePlugin
 
 
-def _encode_png(rgb):
-    """Encode a uint8 (H, W, 3) array as an 8-bit RGB PNG (filter 0)."""
-    height, width, _ = rgb.shape
-    rows = np.zeros((height, 1 + 3 * width), dtype=np.uint8)  # filter byte 0
-    rows[:, 1:] = rgb.reshape(height, 3 * width)
-    compressed = zlib.compress(rows.tobytes(), 6)
-    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
-    idats = [_png_chunk(b"IDAT", compressed[i:i + _IDAT_SIZE])
-             for i in range(0, len(compressed), _IDAT_SIZE)]
-    return b"".join([_PNG_SIGNATURE, _png_chunk(b"IHDR", ihdr), *idats,
-                     _png_chunk(b"IEND", b"")])
+def _png_picture(image, exposure):
+    """A Pillow RGB picture of the tone-mapped image, filled a block of rows at a time.
+
+    Only the picture (4 bytes per pixel inside Pillow) and one block of rows
+    are in memory at once, never a float64 copy of the whole image.
+    """
+    Image, _ = _pillow()
+    height, width, _ = image.shape
+    picture = Image.new("RGB", (width, height))
+    rows = max(1, _TONE_MAP_BLOCK // (3 * width))
+    for y in range(0, height, rows):
+        block = np.ascontiguousarray(image[y:y + rows], dtype=np.float32)
+        picture.paste(Image.fromarray(tone_map(block, exposure)), (0, y))
+    return picture
 
 
-def _write_bytes(path, data):
-    """Write `data` to the file `path`."""
-    with open(path, "wb") as file:
-        file.write(data)
+def _png_text(text):
+    """PNG text chunks (tEXt) from a dict of str -> str."""
+    _, PngImagePlugin = _pillow()
+    info = PngImagePlugin.PngInfo()
+    for key, value in (text or {}).items():
+        info.add_text(key, value)
+    return info
 
 
-def write_png(path, image, *, exposure=0.0):
+def _write_picture(picture, tmp, text):
+    """Encode `picture` as PNG into the file `tmp`."""
+    picture.save(tmp, format="PNG", pnginfo=_png_text(text))
+
+
+def write_png(path, image, *, exposure=0.0, text=None):
     """Write a tone-mapped 8-bit sRGB PNG preview of a linear image, atomically.
 
     Parameters
@@ -470,10 +631,13 @@ def write_png(path, image, *, exposure=0.0):
     path : str or os.PathLike
         The output file.
     image : numpy.ndarray
-        float32 or float64 linear RGB array of shape (H, W, 3).
+        float32 or float64 linear RGB array of shape (H, W, 3); float64
+        values are rounded to float32 first, as in the EXR.
     exposure : float
         Exposure adjustment in stops: values are multiplied by
         ``2**exposure`` before clamping to [0, 1].
+    text : dict of str -> str, optional
+        PNG text chunks (e.g. ``raysort.render_id``).
 
     Raises
     ------
@@ -482,87 +646,20 @@ def write_png(path, image, *, exposure=0.0):
     OutputError
         If the file cannot be written.
     """
-    data = _encode_png(tone_map(_as_rgb_float32(image), exposure))
+    picture = _png_picture(_rgb(image), _check_exposure(exposure))
     with atomic_target(path) as tmp:
-        _write_bytes(tmp, data)
+        _write_picture(picture, tmp, text)
 
 
-def _png_chunks(data, path):
-    """Yield (type, payload) of each chunk after the signature, checking CRCs."""
-    pos = len(_PNG_SIGNATURE)
-    while pos < len(data):
-        if pos + 8 > len(data):
-            raise OutputError(f"cannot read {_q(path)}: truncated PNG chunk")
-        length, kind = struct.unpack(">I4s", data[pos:pos + 8])
-        end = pos + 8 + length
-        if end + 4 > len(data):
-            raise OutputError(f"cannot read {_q(path)}: truncated PNG chunk "
-                              f"{kind!r}")
-        payload = data[pos + 8:end]
-        (crc,) = struct.unpack(">I", data[end:end + 4])
-        if crc != zlib.crc32(kind + payload):
-            raise OutputError(f"cannot read {_q(path)}: bad CRC in PNG "
-                              f"chunk {kind!r}")
-        yield kind, payload
-        pos = end + 4
-
-
-def _parse_ihdr(payload, path):
-    """Return (width, height) from an IHDR payload of a supported PNG."""
-    if len(payload) != 13:
-        raise OutputError(f"cannot read {_q(path)}: bad PNG IHDR chunk")
-    width, height, depth, color, comp, filt, interlace = struct.unpack(
-        ">IIBBBBB", payload)
-    if (depth, color, comp, filt, interlace) != (8, 2, 0, 0, 0) or not (
-            width and height):
-        raise OutputError(f"cannot read {_q(path)}: unsupported PNG (only "
-                          f"non-interlaced 8-bit RGB is read)")
-    return width, height
-
-
-def _decode_png(data, path):
-    """Decode the bytes of a PNG as written by write_png."""
-    if not data.startswith(_PNG_SIGNATURE):
-        raise OutputError(f"cannot read {_q(path)}: not a PNG file")
-    size, idat, ended = None, [], False
-    for kind, payload in _png_chunks(data, path):
-        if size is None and kind != b"IHDR":
-            raise OutputError(f"cannot read {_q(path)}: PNG does not start "
-                              f"with IHDR")
-        if kind == b"IHDR":
-            size = _parse_ihdr(payload, path)
-        elif kind == b"IDAT":
-            idat.append(payload)
-        elif kind == b"IEND":
-            ended = True
-            break
-    if not ended:
-        raise OutputError(f"cannot read {_q(path)}: PNG has no IEND chunk")
-    return _unfilter(b"".join(idat), size, path)
-
-
-def _unfilter(compressed, size, path):
-    """Decompress PNG image data with filter type 0 into (H, W, 3) uint8."""
-    width, height = size
-    try:
-        raw = zlib.decompress(compressed)
-    except zlib.error as exc:
-        raise OutputError(f"cannot read {_q(path)}: bad PNG data: {exc}") from exc
-    if len(raw) != height * (1 + 3 * width):
-        raise OutputError(f"cannot read {_q(path)}: PNG data has {len(raw)} "
-                          f"bytes, expected {height * (1 + 3 * width)}")
-    rows = np.frombuffer(raw, dtype=np.uint8).reshape(height, 1 + 3 * width)
-    if rows[:, 0].any():
-        raise OutputError(f"cannot read {_q(path)}: unsupported PNG row "
-                          f"filter (only filter type 0 is read)")
-    return rows[:, 1:].reshape(height, width, 3).copy()
+def png_bytes(image, *, exposure=0.0):
+    """The tone-mapped 8-bit sRGB PNG of a linear image, as bytes (e.g. for Jupyter)."""
+    buffer = io.BytesIO()
+    _write_picture(_png_picture(_rgb(image), _check_exposure(exposure)), buffer, None)
+    return buffer.getvalue()
 
 
 def read_png(path):
-    """Read an 8-bit RGB PNG as written by :func:`write_png`.
-
-    Verifies the signature and every chunk's CRC; supports only
-    non-interlaced 8-bit RGB with row filter type 0.
+    """Read an 8-bit RGB PNG (with Pillow).
 
     Parameters
     ----------
@@ -577,15 +674,103 @@ def read_png(path):
     Raises
     ------
     OutputError
-        If the file is missing, corrupt or not a supported PNG.
+        If the file is missing, corrupt or not an 8-bit RGB PNG.
     """
     _check_readable(path, _PNG_SIGNATURE, "a PNG")
+    Image, _ = _pillow()
     try:
-        with open(path, "rb") as file:
-            data = file.read()
-    except OSError as exc:
-        raise OutputError(f"cannot read {_q(path)}: {exc.strerror or exc}") from exc
-    return _decode_png(data, path)
+        with Image.open(os.fspath(path), formats=["PNG"]) as picture:
+            picture.load()
+            if picture.mode != "RGB":
+                raise OutputError(f"cannot read {_q(path)}: a {picture.mode} PNG, "
+                                  f"not 8-bit RGB")
+            return np.asarray(picture)
+    except (OSError, SyntaxError, ValueError) as exc:  # Pillow's errors for bad data
+        raise OutputError(f"cannot read {_q(path)}: bad PNG: {exc}") from exc
+
+
+# --------------------------------------------------------------------------
+# An EXR and its PNG preview, as one pair
+# --------------------------------------------------------------------------
+
+def write_render(path, image, *, metadata=None, exposure=0.0, png=True, channels=None):
+    """Write a render as an EXR and (with `png`) its PNG preview next to it.
+
+    Both files are complete temporaries before either is renamed; the two
+    renames then happen, EXR first, while this process holds a lock on the
+    directory, so concurrent writers of the same path leave the EXR and PNG
+    of one render.  Both files record the same ``raysort.render_id`` (an
+    EXR header attribute and a PNG text chunk): a digest of the pixels, the
+    metadata and the exposure, so the same render always gives the same bytes.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``.exr`` file; the preview is the same name with ``.png``.
+    image : numpy.ndarray
+        float32 or float64 linear RGB array of shape (H, W, 3).
+    metadata : dict of str -> str, optional
+        Extra EXR header attributes.
+    exposure : float
+        PNG exposure in stops.
+    png : bool
+        Also write the PNG preview.
+    channels : dict of str -> numpy.ndarray, optional
+        Extra EXR channels (AOV layers), as :func:`write_exr` takes them.
+
+    Returns
+    -------
+    str
+        The render id written into both files.
+
+    Raises
+    ------
+    ValueError, TypeError
+        As :func:`write_exr` and :func:`write_png`.
+    OutputError
+        If a file cannot be written; neither target is then changed.
+    """
+    path = os.fspath(path)
+    if os.path.splitext(path)[1].lower() != ".exr":
+        raise OutputError(f"cannot write {_q(path)}: a render is written to an .exr file")
+    image, exposure, metadata = _as_rgb_float32(image), _check_exposure(exposure), metadata or {}
+    _check_metadata(metadata)
+    extra = _check_channels(channels or {}, image.shape[:2])
+    render_id = _render_id(image, metadata, exposure if png else None, extra)
+    stamp = {"raysort.render_id": render_id}
+    exr = _prepared_exr(image, dict(metadata, **stamp), extra)
+    png_path = os.path.splitext(path)[0] + ".png"
+    picture = _png_picture(image, exposure) if png else None
+    with contextlib.ExitStack() as temporaries:
+        renames = [(temporaries.enter_context(_temporary(path)), path)]
+        _write_exr_file(exr, renames[0][0], path)
+        if png:
+            renames.append((temporaries.enter_context(_temporary(png_path)), png_path))
+            _write_picture(picture, renames[1][0], stamp)
+        for tmp, target in renames:
+            _finish(tmp, target)
+        with _directory_lock(os.path.dirname(path)):
+            for tmp, target in renames:
+                _rename(tmp, target)
+    with contextlib.suppress(OSError):
+        _fsync(os.path.dirname(path) or os.curdir)
+    return render_id
+
+
+def _render_id(image, metadata, exposure, channels=None):
+    """A digest of what the pair shows: pixels, metadata, the preview's exposure and the
+    extra EXR channels.
+
+    Identical renders get identical ids (so their files stay byte-identical);
+    any difference in pixels, settings or exposure gives another id.
+    """
+    digest = hashlib.blake2b(digest_size=16)
+    digest.update(repr((image.shape, sorted(metadata.items()), exposure)).encode())
+    digest.update(memoryview(image).cast("B"))
+    for name, data in sorted((channels or {}).items()):
+        digest.update(name.encode() + b"\0")
+        digest.update(memoryview(data).cast("B"))
+    return digest.hexdigest()
 
 
 # --------------------------------------------------------------------------

@@ -33,6 +33,7 @@ from raysort.params import integer
 from raysort.contract import check_sort
 from raysort.errors import ConfigError, PluginContractError
 from raysort.paths import Bounce, Paths
+from raysort.progress import with_rays
 from raysort.rays import Hits, RayBatch, gather, scatter, scatter_occluded
 from raysort.scene import Scene, load_scene
 from raysort.stats import Counters
@@ -94,6 +95,42 @@ class RenderStats:
             total = total + c
         return total
 
+    def stage_shares(self):
+        """Each stage's share of the summed stage seconds (0..1), largest first."""
+        total = sum(self.stage_seconds.values()) or 1.0
+        return dict(sorted(((k, v / total) for k, v in self.stage_seconds.items() if v > 0),
+                           key=lambda item: -item[1]))
+
+    def _summary(self):
+        """(label, text) rows shared by the text and HTML views."""
+        from raysort.stats import COUNTER_LABELS
+
+        depths = ", ".join(f"depth {d}: {n:,}" for d, n in sorted(self.rays.items()))
+        per_ray = self.closest_hit_counters().per_ray()
+        counters = ("not counted by this traversal" if None in per_ray.values() else
+                    ", ".join(f"{COUNTER_LABELS[k]} {v:.2f}" for k, v in per_ray.items()))
+        return [
+            ("time", f"{self.wall_seconds:.3f} s wall, {self.threads} "
+                     f"thread{'s' if self.threads != 1 else ''}"),
+            ("throughput", f"{self.mrays_per_second:.3f} Mrays/s"),
+            ("rays", f"{self.total_rays:,} ({depths}; shadow: {self.shadow_rays:,})"),
+            ("stages", ", ".join(f"{k} {share:.0%}" for k, share in
+                                 self.stage_shares().items()) or "none"),
+            ("work per ray", counters),
+        ]
+
+    def __repr__(self):
+        rows = "\n".join(f"  {label + ':':<14}{text}" for label, text in self._summary())
+        return f"RenderStats(\n{rows}\n)"
+
+    def _repr_html_(self):
+        from html import escape
+
+        rows = "".join(f"<tr><th style='text-align:left'>{escape(label)}</th>"
+                       f"<td style='text-align:left'>{escape(text)}</td></tr>"
+                       for label, text in self._summary())
+        return f"<table><caption>RenderStats</caption>{rows}</table>"
+
     def as_dict(self):
         return {
             "wall_seconds": self.wall_seconds,
@@ -140,23 +177,33 @@ class RenderResult:
     settings: dict
     aov: dict = field(default_factory=dict)
 
-    def write(self, path, *, png=True, exposure=0.0):
-        """Write the EXR (and a PNG preview next to it); each file appears whole or not at all.
+    def __repr__(self):
+        s = self.settings
+        return (f"RenderResult({s.get('scene')}, {s.get('width')}x{s.get('height')}, "
+                f"{s.get('spp')} spp, sorter {s.get('sorter')}, traversal "
+                f"{s.get('traversal')}: {self.stats.wall_seconds:.3f} s, "
+                f"{self.stats.mrays_per_second:.3f} Mrays/s)")
 
-        AOV layers go into the EXR as extra named channels (``depth.Z``, ``normal.X``, ...).
-        """
+    def _repr_png_(self):
+        """Jupyter shows the image, tone mapped as the PNG preview is (exposure 0)."""
+        from raysort import output
+
+        return output.png_bytes(self.image)
+
+    def write(self, path, *, png=True, exposure=0.0):
+        """Write the EXR (and a PNG preview next to it, of the same render); each file appears
+        whole or not at all (see :func:`raysort.output.write_render`).  AOV layers go into
+        the EXR as extra named channels (``depth.Z``, ``normal.X``, ...)."""
         from raysort import output
 
         path = os.fspath(path)
+        if not path.lower().endswith(".exr"):
+            return output.write_image(path, self.image, exposure=exposure)
         meta = {f"raysort.{k}": str(v) for k, v in self.settings.items()}
-        if path.lower().endswith(".exr"):
-            from raysort.aov import exr_channels
+        from raysort.aov import exr_channels
 
-            output.write_image(path, self.image, metadata=meta, channels=exr_channels(self.aov))
-        else:
-            output.write_image(path, self.image, exposure=exposure)
-        if png and path.lower().endswith(".exr"):
-            output.write_png(os.path.splitext(path)[0] + ".png", self.image, exposure=exposure)
+        output.write_render(path, self.image, metadata=meta, exposure=exposure, png=png,
+                            channels=exr_channels(self.aov))
 
 
 class Pipeline:
@@ -282,7 +329,8 @@ class Pipeline:
                tap=None):
         """Render the scene's camera view; returns a :class:`RenderResult`.
 
-        ``progress(done_tiles, total_tiles)`` is called as tiles finish.  ``aov`` names
+        ``progress(done_tiles, total_tiles)`` is called as tiles finish, with
+        ``rays=`` the rays traced so far if it takes a ``rays`` argument.  ``aov`` names
         layers taken from each pixel's first primary hit (``depth``, ``normal``,
         ``albedo``, ``prim``; see :mod:`raysort.aov`) into ``result.aov``.
         ``tap(record)`` is called with a :class:`Traced` record for every batch of rays
@@ -303,6 +351,7 @@ class Pipeline:
         tiles = [(x, y) for y in range(0, height, self.tile) for x in range(0, width, self.tile)]
         image = np.zeros((height, width, 3), dtype=np.float32)
         stats = RenderStats(threads=self.threads)
+        progress = with_rays(progress, lambda: stats.total_rays)
 
         def finish(tile, result):
             radiance, tile_stats = result

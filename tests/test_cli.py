@@ -4,6 +4,7 @@ Most tests call ``raysort.cli.main`` in-process; a few run ``python -m raysort``
 in a subprocess to see the real exit status and stderr.
 """
 import importlib.resources
+import io
 import json
 import os
 import subprocess
@@ -117,12 +118,23 @@ def test_summary_goes_to_the_current_stdout(tmp_path, capsys):
         assert label in out
 
 
-def test_progress_goes_to_the_current_stderr(tmp_path, capsys):
-    """Without -q the progress bar is written to sys.stderr as it is when main() runs."""
-    code, out, err = run(capsys, "render", "plane", "--size", "8x6", "--spp", "1",
-                         "-o", tmp_path / "x.exr")
-    assert code == 0
-    assert "render plane" in err and "Traceback" not in err
+def test_progress_goes_to_the_current_stderr(tmp_path, capsys, monkeypatch):
+    """Without -q the progress bar is drawn on sys.stderr as it is when main() runs, if
+    that is a terminal; redirected, or with -q, stderr stays empty."""
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    argv = ["render", "plane", "--size", "8x6", "--spp", "1", "-o", tmp_path / "x.exr"]
+    code, out, err = run(capsys, *argv)
+    assert code == 0 and err == ""
+    terminal = Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    assert main([str(a) for a in argv]) == 0
+    assert "render plane" in terminal.getvalue() and "Mrays/s" in terminal.getvalue()
+    terminal.truncate(0)
+    assert main([str(a) for a in argv + ["-q"]]) == 0
+    assert terminal.getvalue() == ""
 
 
 def test_render_default_scene_is_sibenik(tmp_path, capsys):
@@ -217,8 +229,8 @@ def test_bad_input_is_one_line_and_writes_nothing(case, tmp_path, capsys):
     assert os.listdir(out_dir) == []
 
 
-@pytest.mark.parametrize("case", ["missing-directory", "under-a-file", "png-suffix", "no-suffix",
-                                  "is-a-directory", "json-missing-directory"])
+@pytest.mark.parametrize("case", ["under-a-file", "png-suffix", "no-suffix", "is-a-directory",
+                                  "json-under-a-file"])
 def test_bad_output_path_is_one_line_and_writes_nothing(case, tmp_path, capsys):
     """Each unusable output path: exit 2, one error line naming it, nothing created
     (no directory, no image, no temporary file)."""
@@ -227,18 +239,17 @@ def test_bad_output_path_is_one_line_and_writes_nothing(case, tmp_path, capsys):
     (out_dir / "afile").write_bytes(b"keep")
     (out_dir / "dir.exr").mkdir()            # a directory whose name ends in .exr
     extra = []
-    target = {"missing-directory": out_dir / "missing" / "x.exr",
-              "under-a-file": out_dir / "afile" / "x.exr",
+    target = {"under-a-file": out_dir / "afile" / "x.exr",
               "png-suffix": out_dir / "x.png",
               "no-suffix": out_dir / "x",
               "is-a-directory": out_dir / "dir.exr",
-              "json-missing-directory": out_dir / "x.exr"}[case]
-    if case == "json-missing-directory":
-        extra = ["--json", out_dir / "missing" / "x.json"]
+              "json-under-a-file": out_dir / "x.exr"}[case]
+    if case == "json-under-a-file":
+        extra = ["--json", out_dir / "afile" / "sub" / "x.json"]
     before = sorted(os.listdir(out_dir))
     code, out, err = run(capsys, "render", "plane", *TINY, "-o", target, *extra)
     assert code == 2
-    name = "missing" if case.endswith("missing-directory") else os.path.basename(target)
+    name = "afile" if case.startswith("json") else os.path.basename(target)
     assert_one_line_error(err, name)
     assert out == ""
     assert sorted(os.listdir(out_dir)) == before
@@ -307,8 +318,56 @@ def test_plugins_lists_every_builtin(capsys):
 
 
 def test_scenes_lists_packaged_scenes(capsys):
-    """`raysort scenes` prints the packaged scene names, one per line."""
+    """`raysort scenes` prints a header, then each packaged scene's name, triangle count
+    (the loaded scene's) and a one-line description."""
     code, out, err = run(capsys, "scenes")
     assert code == 0 and err == ""
-    assert out.splitlines() == raysort.scene_names()
-    assert {"sibenik", "sponza", "plane", "furnace", "cornell", "forest"} <= set(out.split())
+    header, *lines = out.splitlines()
+    assert header.split() == ["name", "triangles", "description"]
+    assert [line.split()[0] for line in lines] == raysort.scene_names()
+    assert {"sibenik", "sponza", "plane", "furnace", "cornell", "forest"} <= set(
+        raysort.scene_names())
+    for line in lines:
+        name, count, *description = line.split()
+        assert int(count.replace(",", "")) == raysort.load_scene(name).n_triangles
+        assert description, line
+
+
+def test_threads_default_to_the_usable_cores(capsys, tmp_path):
+    """--threads defaults to the cores this process may use (its affinity mask)."""
+    from raysort.cli import build_parser
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    assert build_parser().parse_args(["render"]).threads == cores
+    code, _, _ = run(capsys, "render", "plane", *TINY, "-o", tmp_path / "x.exr",
+                     "--json", tmp_path / "x.json")
+    assert code == 0
+    assert json.loads((tmp_path / "x.json").read_text())["stats"]["threads"] == cores
+
+
+def test_missing_output_directories_are_created_and_reported(tmp_path, capsys):
+    """`-o out/deeper/x.exr` creates out/deeper after the render and says so; the --json
+    directory too.  A render that fails creates nothing."""
+    exr = tmp_path / "out" / "deeper" / "x.exr"
+    js = tmp_path / "meta" / "x.json"
+    code, _, err = run(capsys, "render", "nosuchscene", *TINY, "-o", exr, "--json", js)
+    assert code == 2 and os.listdir(tmp_path) == []
+    code, out, err = run(capsys, "render", "plane", *TINY, "-o", exr, "--json", js)
+    assert code == 0 and err == ""
+    assert sorted(os.listdir(exr.parent)) == ["x.exr", "x.png"] and js.is_file()
+    assert f"(created directory {tmp_path / 'out'})" in out
+    assert f"(created directory {tmp_path / 'meta'})" in out
+    code, out, _ = run(capsys, "render", "plane", *TINY, "-o", exr)
+    assert code == 0 and "created directory" not in out
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux's /proc")
+def test_unwritable_target_fails_before_rendering(capsys, monkeypatch):
+    """/proc looks writable to root but takes no files: the error comes before the render."""
+    def no_render(*args, **kwargs):
+        raise AssertionError("rendered before finding the output unwritable")
+
+    monkeypatch.setattr(raysort.Pipeline, "render", no_render)
+    code, out, err = run(capsys, "render", "plane", *TINY, "-o", "/proc/out.exr")
+    assert code == 2 and out == ""
+    assert_one_line_error(err, "/proc/out.exr", "cannot create a file in '/proc'")

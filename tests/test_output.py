@@ -1,18 +1,19 @@
-"""Tests for raysort.output: EXR and PNG writers, atomic writes, path errors."""
+"""Tests for raysort.output: EXR and PNG writers, render pairs, atomic writes, path errors.
+
+PNG files are decoded with Pillow directly; EXR files with OpenEXR."""
 
 import os
-import struct
-import zlib
+import subprocess
+import sys
 
 import numpy as np
 import pytest
+from PIL import Image
 
 from raysort import output
 from raysort.errors import OutputError, RaysortError
 
 OpenEXR = pytest.importorskip("OpenEXR")
-
-PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 def _bits(a):
@@ -168,11 +169,20 @@ def test_read_exr_without_rgb(tmp_path):
 # PNG
 # --------------------------------------------------------------------------
 
+def _pillow_read(path):
+    """Decode a PNG with Pillow, checking its chunk CRCs first."""
+    with Image.open(path) as picture:
+        picture.verify()
+    with Image.open(path) as picture:
+        assert picture.format == "PNG" and picture.mode == "RGB"
+        return np.asarray(picture), dict(picture.text)
+
+
 def _png_of(tmp_path, values, **kw):
     image = np.array(values, dtype=np.float64).reshape(1, -1, 1).repeat(3, axis=2)
     target = tmp_path / "p.png"
     output.write_png(target, image, **kw)
-    back = output.read_png(target)
+    back, _ = _pillow_read(target)
     assert back.dtype == np.uint8 and back.shape == image.shape
     assert (back == back[..., :1]).all()
     return back[0, :, 0].tolist()
@@ -211,47 +221,31 @@ def test_png_rejects_bad_input(tmp_path):
     assert _listdir(tmp_path) == []
 
 
-def _parse_png(data):
-    """Independent PNG check: signature, chunk structure, CRCs."""
-    assert data[:8] == PNG_SIGNATURE
-    chunks, pos = [], 8
-    while pos < len(data):
-        (length,) = struct.unpack(">I", data[pos:pos + 4])
-        kind = data[pos + 4:pos + 8]
-        payload = data[pos + 8:pos + 8 + length]
-        (crc,) = struct.unpack(">I", data[pos + 8 + length:pos + 12 + length])
-        assert len(payload) == length
-        assert crc == zlib.crc32(kind + payload) & 0xFFFFFFFF, kind
-        chunks.append((kind, payload))
-        pos += 12 + length
-    assert pos == len(data)
-    return chunks
-
-
-@pytest.mark.parametrize("idat_size", [None, 97])
-def test_png_is_valid_independently(tmp_path, monkeypatch, idat_size):
-    if idat_size:
-        monkeypatch.setattr(output, "_IDAT_SIZE", idat_size)
+@pytest.mark.parametrize("block", [None, 7, 39])
+def test_png_pixels_and_text(tmp_path, monkeypatch, block):
+    """Pillow reads back every pixel as the tone map of the float32 value, however
+    the rows are cut into blocks (39 values = one row of 13 pixels per block)."""
+    if block:
+        monkeypatch.setattr(output, "_TONE_MAP_BLOCK", block)
     height, width = 9, 13
-    rng = np.random.default_rng(2)
-    image = rng.uniform(-0.1, 1.2, (height, width, 3))
+    image = np.random.default_rng(2).uniform(-0.1, 1.2, (height, width, 3))
     target = tmp_path / "v.png"
-    output.write_png(target, image)
-    chunks = _parse_png(target.read_bytes())
-    kinds = [kind for kind, _ in chunks]
-    assert kinds[0] == b"IHDR" and kinds[-1] == b"IEND"
-    assert set(kinds[1:-1]) == {b"IDAT"}
-    if idat_size:
-        assert len(kinds) > 3
-    assert chunks[-1][1] == b""
-    assert struct.unpack(">IIBBBBB", chunks[0][1]) == (width, height, 8, 2, 0, 0, 0)
-    raw = zlib.decompress(b"".join(p for k, p in chunks if k == b"IDAT"))
-    assert len(raw) == height * (1 + 3 * width)
-    rows = np.frombuffer(raw, np.uint8).reshape(height, 1 + 3 * width)
-    assert not rows[:, 0].any()
-    expected = output.tone_map(image.astype(np.float32))
-    assert np.array_equal(rows[:, 1:].reshape(height, width, 3), expected)
-    assert np.array_equal(output.read_png(target), expected)
+    output.write_png(target, image, exposure=0.5, text={"raysort.render_id": "abc"})
+    pixels, text = _pillow_read(target)
+    assert pixels.shape == (height, width, 3)
+    linear = np.clip(image.astype(np.float32).astype(np.float64) * 2 ** 0.5, 0, 1)
+    srgb = np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055)
+    assert np.array_equal(pixels, np.rint(srgb * 255).astype(np.uint8))
+    assert text == {"raysort.render_id": "abc"}
+    assert np.array_equal(output.read_png(target), pixels)
+
+
+def test_tone_map_blocks_match_one_pass(monkeypatch):
+    image = np.random.default_rng(3).uniform(-0.5, 1.5, (7, 11, 3)).astype(np.float32)
+    whole = output.tone_map(image, 0.25)
+    monkeypatch.setattr(output, "_TONE_MAP_BLOCK", 5)
+    assert np.array_equal(output.tone_map(image, 0.25), whole)
+    assert np.array_equal(output.tone_map(image[:, ::2], 0.25), whole[:, ::2])
 
 
 def _corrupt(tmp_path, data):
@@ -263,26 +257,138 @@ def _corrupt(tmp_path, data):
     return str(info.value)
 
 
-def test_read_png_checks_signature_and_crc(tmp_path):
+def test_read_png_rejects_bad_files(tmp_path):
     output.write_png(tmp_path / "good.png", np.full((2, 3, 3), 0.5))
     good = (tmp_path / "good.png").read_bytes()
     assert "not a PNG" in _corrupt(tmp_path, b"\x89PNX" + good[4:])
-    # flip a byte inside the IHDR payload (offset 8 + 8 = first payload byte)
     broken = bytearray(good)
-    broken[18] ^= 0xFF
-    assert "CRC" in _corrupt(tmp_path, bytes(broken))
-    # flip the last byte of the IDAT CRC
-    idat_end = good.index(b"IEND") - 4
-    broken = bytearray(good)
-    broken[idat_end - 1] ^= 0x01
-    assert "CRC" in _corrupt(tmp_path, bytes(broken))
-    assert "truncated" in _corrupt(tmp_path, good[:-6])
-    assert "IEND" in _corrupt(tmp_path, good[:good.index(b"IEND") - 4])
+    broken[18] ^= 0xFF                     # inside the IHDR payload: bad CRC
+    _corrupt(tmp_path, bytes(broken))
+    _corrupt(tmp_path, good[:40])          # truncated in the image data
+    Image.new("L", (2, 2)).save(tmp_path / "grey.png")
+    with pytest.raises(OutputError, match="not 8-bit RGB"):
+        output.read_png(tmp_path / "grey.png")
 
 
 def test_read_png_missing(tmp_path):
     with pytest.raises(OutputError, match="does not exist"):
         output.read_png(tmp_path / "missing.png")
+
+
+PEAK_SCRIPT = """
+import resource, sys
+import numpy as np
+from raysort import output
+height, width = 3072, 4096
+image = np.empty((height, width, 3), np.float32)
+image[:] = np.linspace(-0.1, 1.3, width, dtype=np.float32)[None, :, None]
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+output.write_png(sys.argv[1], image)
+after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(image.nbytes, (after - before) * 1024)
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="ru_maxrss in KiB is Linux's")
+def test_png_peak_memory_stays_near_the_image_size(tmp_path):
+    """Writing the preview of a 4096x3072 float32 image (144 MiB) adds at most half the
+    image's size to the process's peak resident memory: Pillow's 8-bit picture (a third)
+    plus a block of rows.  Tone mapping the whole image in float64 at once added ~10x."""
+    proc = subprocess.run([sys.executable, "-c", PEAK_SCRIPT, str(tmp_path / "big.png")],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    image_bytes, extra_peak = map(int, proc.stdout.split())
+    assert extra_peak <= image_bytes // 2, (
+        f"writing the PNG raised the peak by {extra_peak / 2**20:.0f} MiB for a "
+        f"{image_bytes / 2**20:.0f} MiB image")
+    assert _pillow_read(tmp_path / "big.png")[0].shape == (3072, 4096, 3)
+
+
+# --------------------------------------------------------------------------
+# An EXR and its PNG as one pair
+# --------------------------------------------------------------------------
+
+def _render_id(exr_path):
+    return OpenEXR.File(str(exr_path), header_only=True).header()["raysort.render_id"]
+
+
+def test_write_render_pair_shares_a_render_id(tmp_path):
+    target = tmp_path / "r.exr"
+    image = np.full((4, 5, 3), 0.5, np.float32)
+    render_id = output.write_render(target, image, metadata={"raysort.scene": "x"},
+                                    exposure=1.0)
+    assert _listdir(tmp_path) == ["r.exr", "r.png"]
+    assert _render_id(target) == render_id
+    assert OpenEXR.File(str(target), header_only=True).header()["raysort.scene"] == "x"
+    pixels, text = _pillow_read(tmp_path / "r.png")
+    assert text == {"raysort.render_id": render_id}
+    assert (pixels == 255).all()                           # 0.5 at +1 EV
+    np.testing.assert_array_equal(output.read_exr(target), image)
+    before = target.read_bytes(), (tmp_path / "r.png").read_bytes()
+    assert output.write_render(target, image, metadata={"raysort.scene": "x"},
+                               exposure=1.0) == render_id     # the same render: same bytes
+    assert (target.read_bytes(), (tmp_path / "r.png").read_bytes()) == before
+    changed = image.copy()
+    changed[3, 4, 2] = np.nextafter(np.float32(0.5), np.float32(1))
+    for other in (output.write_render(target, changed, metadata={"raysort.scene": "x"},
+                                      exposure=1.0),
+                  output.write_render(target, image, metadata={"raysort.scene": "y"},
+                                      exposure=1.0),
+                  output.write_render(target, image, metadata={"raysort.scene": "x"})):
+        assert other != render_id
+    output.write_render(tmp_path / "only.EXR", image, png=False)
+    assert _listdir(tmp_path) == ["only.EXR", "r.exr", "r.png"]
+
+
+def test_write_render_failure_changes_neither_file(tmp_path, monkeypatch):
+    """The PNG fails after the EXR temporary is complete: both old files stay, no temps."""
+    exr, png = tmp_path / "r.exr", tmp_path / "r.png"
+    exr.write_bytes(b"old exr")
+    png.write_bytes(b"old png")
+
+    def fail(*args):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(output, "_write_picture", fail)
+    with pytest.raises(OutputError, match="No space left"):
+        output.write_render(exr, np.ones((2, 2, 3)))
+    assert _listdir(tmp_path) == ["r.exr", "r.png"]
+    assert exr.read_bytes() == b"old exr" and png.read_bytes() == b"old png"
+    with pytest.raises(OutputError, match=".exr"):
+        output.write_render(tmp_path / "r.png", np.ones((2, 2, 3)))
+
+
+PAIR_WRITER = """
+import os, sys, time
+import numpy as np
+from raysort import output
+directory, value, go = sys.argv[1], float(sys.argv[2]), sys.argv[3]
+image = np.full((48, 64, 3), value, np.float32)
+while not os.path.exists(go):
+    time.sleep(0.001)
+for k in range(int(sys.argv[4])):
+    output.write_render(os.path.join(directory, f"x{k}.exr"), image)
+"""
+
+
+@pytest.mark.slow
+def test_concurrent_writers_leave_matching_pairs(tmp_path):
+    """Four processes write renders of different values to the same twelve paths at
+    once; every EXR ends next to the PNG of the same render (same id, and the PNG's
+    pixels are the tone map of the EXR's value)."""
+    go, targets = tmp_path / "go", 12
+    writers = [subprocess.Popen([sys.executable, "-c", PAIR_WRITER, str(tmp_path), str(v),
+                                 str(go), str(targets)])
+               for v in (0.1, 0.3, 0.6, 0.9)]
+    go.touch()
+    assert [w.wait(timeout=600) for w in writers] == [0] * 4
+    for k in range(targets):
+        exr = tmp_path / f"x{k}.exr"
+        pixels, text = _pillow_read(tmp_path / f"x{k}.png")
+        assert text["raysort.render_id"] == _render_id(exr), k
+        assert np.array_equal(pixels, output.tone_map(output.read_exr(exr))), k
+    assert not [name for name in os.listdir(tmp_path) if name.startswith(".")]
 
 
 # --------------------------------------------------------------------------
@@ -339,13 +445,13 @@ def test_png_failure_leaves_no_temp_and_keeps_target(tmp_path, monkeypatch,
     target.write_bytes(b"old png")
     seen = []
 
-    def write_half(path, data):
+    def write_half(picture, path, text):
         seen.append(path)
         with open(path, "wb") as file:
-            file.write(data[:len(data) // 2])
+            file.write(b"\x89PNG half")
         raise exc
 
-    monkeypatch.setattr(output, "_write_bytes", write_half)
+    monkeypatch.setattr(output, "_write_picture", write_half)
     with pytest.raises(raised) as info:
         output.write_png(target, np.ones((8, 8, 3)))
     if raised is OutputError:
@@ -496,6 +602,28 @@ def test_check_writable_creates_nothing(tmp_path):
         output.check_writable(tmp_path / "a" / "b" / "c.exr")
     assert _listdir(tmp_path) == ["old.png"]
     assert existing.read_bytes() == b"keep"
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux's /proc")
+def test_check_writable_probes_the_directory():
+    """/proc looks writable to root, but no file can be made there: the probe finds out
+    before anything is rendered."""
+    _assert_output_error(lambda: output.check_writable("/proc/out.exr"), "/proc/out.exr",
+                         "cannot create a file in '/proc'")
+
+
+def test_check_writable_with_parents(tmp_path):
+    path = tmp_path / "a" / "b" / "c.exr"
+    output.check_writable(path, parents=True)
+    assert _listdir(tmp_path) == []
+    afile = tmp_path / "afile"
+    afile.write_bytes(b"")
+    _assert_output_error(lambda: output.check_writable(afile / "b" / "c.exr", parents=True),
+                         afile / "b" / "c.exr", "is not a directory")
+    assert output.make_parents(path) == str(tmp_path / "a")
+    assert (tmp_path / "a" / "b").is_dir()
+    assert output.make_parents(path) is None
+    assert output.make_parents("c.exr") is None
 
 
 def test_empty_path():
