@@ -7,6 +7,11 @@ raysort needs only the triangles (vertices and faces) of a mesh; any mesh trimes
 loads will do.  ``Pipeline.trace`` sorts, traverses and returns the closest hit of every
 ray, in the order you gave them: ``t`` (inf on a miss), the triangle index ``prim`` (-1 on
 a miss) and the barycentric coordinates ``u``, ``v`` of the hit in that triangle.
+
+The same in one call, with the BVH cached by the mesh's content:
+``raysort.trace(vertices, faces, origins, directions)``; and for code written against
+trimesh's ``mesh.ray``: ``mesh.ray = raysort.trimesh.RayMeshIntersector(mesh)``.
+A Pipeline, as here, lets you choose and compare the sorter and traversal.
 """
 import argparse
 
