@@ -4,13 +4,18 @@ Each function reads its arrays once and returns ``(code, where)``: ``code`` is
 0 when the contract holds, otherwise a :class:`Bad` value, and ``where`` the
 first offending position; :mod:`raysort.contract` turns that into a message.
 
-The loops are written for speed on valid input, which is every frame: a block
-of ``CHUNK`` elements is tested without branches (``bad |= ...``, which the
-compiler can vectorise) and only a block found bad is scanned again to find the
-first offending element.  A value ``x`` is finite exactly when ``x - x == 0``.
+The loops are written for valid input, which is every frame: a block of
+elements (a sub-packet, or ``CHUNK`` values) is tested without branches
+(``bad |= ...`` over plain pointers, which the compiler vectorises) and only a
+block found bad is scanned again for its first offending element.  A float
+``x`` is finite exactly when ``x - x == 0``.  The functions take int32 or
+int64 index arrays (the caller converts other integer types).
 """
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.stdlib cimport calloc, free
+from libc.string cimport memset
+
+import numpy as np
 
 ctypedef fused index_t:
     int32_t
@@ -21,7 +26,7 @@ ctypedef fused real_t:
     double
 
 cdef enum:
-    CHUNK = 64          # elements tested before one branch on the result
+    CHUNK = 256         # values tested before one branch on the result
 
 
 cpdef enum Bad:
@@ -45,13 +50,17 @@ cpdef enum Bad:
     BAD_DESCENDING          # a[i] < a[i - 1]                           (position i)
 
 
+cdef inline Py_ssize_t block_end(Py_ssize_t start, Py_ssize_t n) noexcept nogil:
+    return start + CHUNK if start + CHUNK < n else n
+
+
 # ---------------------------------------------------------------------------
 # a sorter's order and offsets
 # ---------------------------------------------------------------------------
 
-cdef Py_ssize_t large_packet(const int32_t[::1] packets, int64_t j) noexcept nogil:
-    """The last p with packets[p] <= j (packets ascend from 0)."""
-    cdef Py_ssize_t lo = 0, hi = packets.shape[0] - 1, mid
+cdef Py_ssize_t large_packet(const int32_t *packets, Py_ssize_t n_big, int64_t j) noexcept nogil:
+    """The last p < n_big with packets[p] <= j (packets ascend from 0)."""
+    cdef Py_ssize_t lo = 0, hi = n_big, mid
     while hi - lo > 1:
         mid = (lo + hi) // 2
         if packets[mid] <= j:
@@ -61,59 +70,92 @@ cdef Py_ssize_t large_packet(const int32_t[::1] packets, int64_t j) noexcept nog
     return lo
 
 
-cdef int sort_kernel(const index_t[::1] order, const index_t[::1] offsets,
-                     const int32_t[::1] packets, int64_t n, int64_t max_packet,
+cdef int sort_kernel(const index_t *order, const index_t *offsets, Py_ssize_t n_sub,
+                     const int32_t *packets, Py_ssize_t n_big, int64_t n, int64_t max_packet,
                      uint8_t *seen, Py_ssize_t *where) noexcept nogil:
-    cdef Py_ssize_t n_sub = offsets.shape[0] - 1, k, i, p
-    cdef int64_t a, b, j, lo, hi
+    cdef Py_ssize_t k, i, k_big
+    cdef int64_t a, b, lo, hi
+    cdef index_t j
+    cdef int bad
     if offsets[0] != 0:
         return BAD_OFFSETS_START
     if offsets[n_sub] != n:
         return BAD_OFFSETS_END
     for k in range(n_sub):
         where[0] = k
-        a = offsets[k]
-        b = offsets[k + 1]
+        a, b = offsets[k], offsets[k + 1]
         if b <= a:
             return BAD_OFFSETS_ORDER
         if b > n:
             return BAD_OFFSETS_RANGE
         if b - a > max_packet:
             return BAD_PACKET_SIZE
-        j = order[a]
-        if j < 0 or j >= n:
+        if order[a] < 0 or order[a] >= n:
             where[0] = a
             return BAD_INDEX_RANGE
-        p = large_packet(packets, j)
-        lo, hi = packets[p], packets[p + 1]       # 0 <= lo <= j < hi <= n
-        for i in range(a, b):
-            j = order[i]
-            if j < lo or j >= hi or seen[j]:
-                where[0] = i
-                if j < 0 or j >= n:
-                    return BAD_INDEX_RANGE
-                if seen[j]:
-                    return BAD_INDEX_REPEAT
-                where[0] = k
-                return BAD_MIXED
-            seen[j] = 1
+        k_big = large_packet(packets, n_big, order[a])
+        lo, hi = packets[k_big], packets[k_big + 1]        # 0 <= lo <= order[a] < hi <= n
+        bad = 0
+        for i in range(a, b):                              # all in this large packet
+            bad |= (order[i] < lo) | (order[i] >= hi)
+        if not bad:
+            for i in range(a, b):                          # each seen once
+                j = order[i]
+                bad |= seen[j]
+                seen[j] = 1
+        if bad:
+            return sort_fault(order, a, b, lo, hi, n, seen, k, where)
     return 0
 
 
-def sort_result(const index_t[::1] order, const index_t[::1] offsets,
-                const int32_t[::1] packets, int64_t n, int64_t max_packet):
-    """A sorter's ``order``/``offsets`` for ``n`` rays in the (valid) large packets
-    ``packets``: a permutation of ``range(n)`` cut into sub-packets of 1..max_packet rays,
-    each inside one large packet.  The caller checks ``len(order) == n`` and
-    ``len(offsets) >= 1``."""
+cdef int sort_fault(const index_t *order, int64_t a, int64_t b, int64_t lo, int64_t hi,
+                    int64_t n, uint8_t *seen, Py_ssize_t k, Py_ssize_t *where) noexcept nogil:
+    """What is wrong in sub-packet k, known bad, and where.  Sub-packets before it are
+    valid, so every ray of order[:b] is in range when the range test passed here."""
+    cdef int64_t i
+    for i in range(a, b):
+        if order[i] < lo or order[i] >= hi:
+            where[0] = i
+            if order[i] < 0 or order[i] >= n:
+                return BAD_INDEX_RANGE
+            where[0] = k
+            return BAD_MIXED
+    memset(seen, 0, n)
+    for i in range(b):
+        if seen[order[i]]:
+            where[0] = i
+            return BAD_INDEX_REPEAT
+        seen[order[i]] = 1
+    return BAD_INDEX_REPEAT     # not reached
+
+
+def sort_result(order, offsets, const int32_t[::1] packets, int64_t n, int64_t max_packet):
+    """A sorter's ``order``/``offsets`` (contiguous, both int32 or both int64) for ``n``
+    rays in the (valid) large packets ``packets``: a permutation of ``range(n)`` cut into
+    sub-packets of 1..max_packet rays, each inside one large packet.  The caller checks
+    ``len(order) == n`` and ``len(offsets) >= 1``."""
     cdef Py_ssize_t where = 0
     cdef int code
+    cdef const int32_t[::1] order32, offsets32
+    cdef const int64_t[::1] order64, offsets64
     cdef uint8_t *seen = <uint8_t *> calloc(n + 1, 1)
     if seen == NULL:
         raise MemoryError()
-    with nogil:
-        code = sort_kernel(order, offsets, packets, n, max_packet, seen, &where)
-    free(seen)
+    try:
+        if order.dtype == np.int32:
+            order32, offsets32 = order, offsets
+            with nogil:
+                code = sort_kernel(&order32[0] if n else NULL, &offsets32[0],
+                                   offsets32.shape[0] - 1, &packets[0], packets.shape[0] - 1,
+                                   n, max_packet, seen, &where)
+        else:
+            order64, offsets64 = order, offsets
+            with nogil:
+                code = sort_kernel(&order64[0] if n else NULL, &offsets64[0],
+                                   offsets64.shape[0] - 1, &packets[0], packets.shape[0] - 1,
+                                   n, max_packet, seen, &where)
+    finally:
+        free(seen)
     return code, where
 
 
@@ -121,37 +163,38 @@ def sort_result(const index_t[::1] order, const index_t[::1] offsets,
 # a traversal's hits
 # ---------------------------------------------------------------------------
 
-cdef inline bint lane_bad(int32_t p, float tmin, float t, float t0, float u, float v,
-                          uint32_t n_prim, bint any_hit) noexcept nogil:
-    """prim is -1 or < n_prim; a closest hit lies in (tmin, t0) with finite u, v."""
+cdef inline int closest_bad(int32_t p, float tmin, float t, float t0, float u, float v,
+                            uint32_t n_prim) noexcept nogil:
+    """prim is -1 or below n_prim; a hit lies in (tmin, t0) with finite u, v."""
     return ((<uint32_t> (p + 1) > n_prim)
-            | ((p >= 0) & (not any_hit)
-               & ((not (tmin < t)) | (not (t < t0)) | (not ((u - u) + (v - v) == 0)))))
+            | ((p >= 0) & ((not (tmin < t)) | (not (t < t0)) | ((u - u) + (v - v) != 0))))
 
 
 cdef int lanes_kernel(const int32_t *prim, const float *tmin, const float *t, const float *t0,
                       const float *u, const float *v, Py_ssize_t capacity, uint32_t n_prim,
                       bint any_hit, Py_ssize_t *where) noexcept nogil:
-    cdef Py_ssize_t block, a, b, lane
-    cdef bint bad
-    for block in range((capacity + CHUNK - 1) // CHUNK):
-        a = block * CHUNK
-        b = a + CHUNK if a + CHUNK < capacity else capacity
-        bad = False
-        for lane in range(a, b):
-            bad |= lane_bad(prim[lane], tmin[lane], t[lane], t0[lane], u[lane], v[lane],
-                            n_prim, any_hit)
-        if not bad:
-            continue
-        for lane in range(a, b):
-            if lane_bad(prim[lane], tmin[lane], t[lane], t0[lane], u[lane], v[lane], n_prim,
-                        any_hit):
+    cdef Py_ssize_t a = 0, b, lane
+    cdef int bad
+    while a < capacity:
+        b = block_end(a, capacity)
+        bad = 0
+        if any_hit:             # a hit is any valid prim; t is the traversal's business
+            for lane in range(a, b):
+                bad |= <uint32_t> (prim[lane] + 1) > n_prim
+        else:
+            for lane in range(a, b):
+                bad |= closest_bad(prim[lane], tmin[lane], t[lane], t0[lane], u[lane],
+                                   v[lane], n_prim)
+        if bad:
+            for lane in range(a, b):
                 where[0] = lane
                 if <uint32_t> (prim[lane] + 1) > n_prim:
                     return BAD_PRIM
-                if tmin[lane] < t[lane] < t0[lane]:
-                    return BAD_UV
-                return BAD_T
+                if any_hit or not closest_bad(prim[lane], tmin[lane], t[lane], t0[lane],
+                                              u[lane], v[lane], n_prim):
+                    continue
+                return BAD_UV if tmin[lane] < t[lane] < t0[lane] else BAD_T
+        a = b
     return 0
 
 
@@ -159,34 +202,33 @@ cdef int index_lanes_kernel(const int32_t *prim, const int32_t *index, const int
                             const int32_t *counts, Py_ssize_t n_sub, const int32_t *order,
                             const int32_t *offsets, Py_ssize_t capacity,
                             Py_ssize_t *where) noexcept nogil:
-    """Each lane of sub-packet k holds ``order[offsets[k] + j]``; others hold no ray."""
-    cdef Py_ssize_t k, j, s, end = 0, lane
-    cdef bint bad = False
-    for k in range(n_sub):
-        s = starts[k]
-        for lane in range(end, s):
-            bad |= (index[lane] != -1) | (prim[lane] != -1)
-        for j in range(counts[k]):
-            bad |= index[s + j] != order[offsets[k] + j]
-        end = s + counts[k]
-    for lane in range(end, capacity):
-        bad |= (index[lane] != -1) | (prim[lane] != -1)
-    if not bad:
-        return 0
-    end = 0                     # find the first bad lane
+    """Each lane of sub-packet k holds ``order[offsets[k] + j]``; other lanes hold no ray
+    (index and prim -1)."""
+    cdef Py_ssize_t k, j, s, c, end = 0, lane
+    cdef const int32_t *lanes
+    cdef const int32_t *rays
+    cdef int bad
     for k in range(n_sub + 1):
         s = starts[k] if k < n_sub else capacity
+        c = counts[k] if k < n_sub else 0
+        bad = 0
         for lane in range(end, s):
-            if index[lane] != -1 or prim[lane] != -1:
-                where[0] = lane
-                return BAD_PADDING
-        if k == n_sub:
-            break
-        for j in range(counts[k]):
-            if index[s + j] != order[offsets[k] + j]:
-                where[0] = s + j
-                return BAD_LANE_INDEX
-        end = s + counts[k]
+            bad |= (index[lane] != -1) | (prim[lane] != -1)
+        if bad:
+            for lane in range(end, s):
+                if index[lane] != -1 or prim[lane] != -1:
+                    where[0] = lane
+                    return BAD_PADDING
+        lanes = index + s
+        rays = order + (offsets[k] if k < n_sub else 0)
+        for j in range(c):
+            bad |= lanes[j] != rays[j]
+        if bad:
+            for j in range(c):
+                if lanes[j] != rays[j]:
+                    where[0] = s + j
+                    return BAD_LANE_INDEX
+        end = s + c
     return 0
 
 
@@ -216,30 +258,29 @@ def hits(const float[:, ::1] rows, const float[::1] t0, const int32_t[::1] prim,
 # rays made by a plugin
 # ---------------------------------------------------------------------------
 
-cdef inline bint ray_bad(const float *const *o, const float *const *d, float tmin, float tmax,
-                         Py_ssize_t i) noexcept nogil:
+cdef inline int ray_bad(float ox, float oy, float oz, float dx, float dy, float dz, float tmin,
+                        float tmax) noexcept nogil:
     """An active ray (tmin < tmax) needs tmin >= 0 and a finite origin and direction."""
-    cdef float acc = ((o[0][i] - o[0][i]) + (o[1][i] - o[1][i]) + (o[2][i] - o[2][i])
-                      + (d[0][i] - d[0][i]) + (d[1][i] - d[1][i]) + (d[2][i] - d[2][i]))
-    return (tmin < tmax) & ((not (tmin >= 0)) | (not (acc == 0)))
+    cdef float acc = (ox - ox) + (oy - oy) + (oz - oz) + (dx - dx) + (dy - dy) + (dz - dz)
+    return (tmin < tmax) & ((not (tmin >= 0)) | (acc != 0))
 
 
-cdef int rays_kernel(const float *const *o, const float *const *d, const float *tmin,
-                     const float *tmax, Py_ssize_t n, Py_ssize_t *where) noexcept nogil:
-    cdef Py_ssize_t block, a, b, i
-    cdef bint bad
-    for block in range((n + CHUNK - 1) // CHUNK):
-        a = block * CHUNK
-        b = a + CHUNK if a + CHUNK < n else n
-        bad = False
+cdef int rays_kernel(const float *ox, const float *oy, const float *oz, const float *dx,
+                     const float *dy, const float *dz, const float *tmin, const float *tmax,
+                     Py_ssize_t n, Py_ssize_t *where) noexcept nogil:
+    cdef Py_ssize_t a = 0, b, i
+    cdef int bad
+    while a < n:
+        b = block_end(a, n)
+        bad = 0
         for i in range(a, b):
-            bad |= ray_bad(o, d, tmin[i], tmax[i], i)
-        if not bad:
-            continue
-        for i in range(a, b):
-            if ray_bad(o, d, tmin[i], tmax[i], i):
-                where[0] = i
-                return BAD_RAY if tmin[i] >= 0 else BAD_TMIN
+            bad |= ray_bad(ox[i], oy[i], oz[i], dx[i], dy[i], dz[i], tmin[i], tmax[i])
+        if bad:
+            for i in range(a, b):
+                if ray_bad(ox[i], oy[i], oz[i], dx[i], dy[i], dz[i], tmin[i], tmax[i]):
+                    where[0] = i
+                    return BAD_RAY if tmin[i] >= 0 else BAD_TMIN
+        a = b
     return 0
 
 
@@ -250,14 +291,12 @@ def rays(const float[:, ::1] data, Py_ssize_t n, int origin_row, int direction_r
     and ``direction_row``), or marked invalid (``not tmin < tmax``), which the gather
     stores inactive."""
     cdef Py_ssize_t where = 0
-    cdef const float *o[3]
-    cdef const float *d[3]
-    cdef int code, a
-    for a in range(3):
-        o[a] = &data[origin_row + a, 0]
-        d[a] = &data[direction_row + a, 0]
+    cdef int code
+    cdef int o = origin_row, d = direction_row
     with nogil:
-        code = rays_kernel(o, d, &data[tmin_row, 0], &data[tmax_row, 0], n, &where)
+        code = rays_kernel(&data[o, 0], &data[o + 1, 0], &data[o + 2, 0], &data[d, 0],
+                           &data[d + 1, 0], &data[d + 2, 0], &data[tmin_row, 0],
+                           &data[tmax_row, 0], n, &where)
     return code, where
 
 
@@ -265,61 +304,78 @@ def rays(const float[:, ::1] data, Py_ssize_t n, int origin_row, int direction_r
 # index and value arrays
 # ---------------------------------------------------------------------------
 
-cdef int index_kernel(const index_t[::1] a, int64_t lo, int64_t hi, bint ascending,
+cdef int index_kernel(const index_t *x, Py_ssize_t n, index_t lo, index_t hi, bint ascending,
                       Py_ssize_t *where) noexcept nogil:
-    cdef Py_ssize_t block, start, end, i, n = a.shape[0]
-    cdef bint bad
-    for block in range((n + CHUNK - 1) // CHUNK):
-        start = block * CHUNK
-        end = start + CHUNK if start + CHUNK < n else n
-        bad = False
-        for i in range(start, end):
-            bad |= (a[i] < lo) | (a[i] >= hi)
+    cdef Py_ssize_t a = 0, b, i
+    cdef int bad
+    while a < n:
+        b = block_end(a, n)
+        bad = 0
+        for i in range(a, b):
+            bad |= (x[i] < lo) | (x[i] >= hi)
         if ascending:
-            for i in range(start if start else 1, end):
-                bad |= a[i] < a[i - 1]
-        if not bad:
-            continue
-        for i in range(start, end):
-            where[0] = i
-            if a[i] < lo or a[i] >= hi:
-                return BAD_INDEX_RANGE
-            if ascending and i and a[i] < a[i - 1]:
-                return BAD_DESCENDING
+            for i in range(a if a else 1, b):
+                bad |= x[i] < x[i - 1]
+        if bad:
+            for i in range(a, b):
+                where[0] = i
+                if x[i] < lo or x[i] >= hi:
+                    return BAD_INDEX_RANGE
+                if ascending and i and x[i] < x[i - 1]:
+                    return BAD_DESCENDING
+        a = b
     return 0
 
 
-def index_array(const index_t[::1] a, int64_t lo, int64_t hi, bint ascending):
-    """Every ``a[i]`` in ``[lo, hi)`` and, with ``ascending``, ``a[i - 1] <= a[i]``."""
+def index_array(x, int64_t lo, int64_t hi, bint ascending):
+    """Every ``x[i]`` in ``[lo, hi)`` and, with ``ascending``, ``x[i - 1] <= x[i]``
+    (``x``: a contiguous int32 or int64 array; for int32, ``lo`` and ``hi`` must fit)."""
     cdef Py_ssize_t where = 0
     cdef int code
-    with nogil:
-        code = index_kernel(a, lo, hi, ascending, &where)
+    cdef const int32_t[::1] x32
+    cdef const int64_t[::1] x64
+    if x.dtype == np.int32:
+        x32 = x
+        with nogil:
+            code = index_kernel(&x32[0] if x32.shape[0] else NULL, x32.shape[0], <int32_t> lo,
+                                <int32_t> hi, ascending, &where)
+    else:
+        x64 = x
+        with nogil:
+            code = index_kernel(&x64[0] if x64.shape[0] else NULL, x64.shape[0], lo, hi,
+                                ascending, &where)
     return code, where
 
 
-cdef int finite_kernel(const real_t[::1] a, Py_ssize_t *where) noexcept nogil:
-    cdef Py_ssize_t block, start, end, i, n = a.shape[0]
-    cdef bint bad
-    for block in range((n + CHUNK - 1) // CHUNK):
-        start = block * CHUNK
-        end = start + CHUNK if start + CHUNK < n else n
-        bad = False
-        for i in range(start, end):
-            bad |= not (a[i] - a[i] == 0)
-        if not bad:
-            continue
-        for i in range(start, end):
-            if not (a[i] - a[i] == 0):
-                where[0] = i
-                return BAD_NOT_FINITE
+cdef int finite_kernel(const real_t *x, Py_ssize_t n, Py_ssize_t *where) noexcept nogil:
+    cdef Py_ssize_t a = 0, b, i
+    cdef int bad
+    while a < n:
+        b = block_end(a, n)
+        bad = 0
+        for i in range(a, b):
+            bad |= (x[i] - x[i]) != 0
+        if bad:
+            for i in range(a, b):
+                if (x[i] - x[i]) != 0:
+                    where[0] = i
+                    return BAD_NOT_FINITE
+        a = b
     return 0
 
 
-def finite(const real_t[::1] a):
-    """Every value finite (a flat view of any float array)."""
+def finite(x):
+    """Every value of ``x`` (a contiguous 1-d float32 or float64 array) finite."""
     cdef Py_ssize_t where = 0
     cdef int code
-    with nogil:
-        code = finite_kernel(a, &where)
+    cdef const float[::1] x32
+    cdef const double[::1] x64
+    if x.dtype == np.float32:
+        x32 = x
+        with nogil:
+            code = finite_kernel(&x32[0] if x32.shape[0] else NULL, x32.shape[0], &where)
+    else:
+        x64 = x
+        with nogil:
+            code = finite_kernel(&x64[0] if x64.shape[0] else NULL, x64.shape[0], &where)
     return code, where

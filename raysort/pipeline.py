@@ -407,9 +407,9 @@ def _check_image_size(width, height):
     except (AttributeError, ValueError, OSError):   # not on this platform
         return
     if need > have:
-        raise ConfigError(f"an image of {width}x{height} needs {need / 2**30:.1f} GiB for its "
+        raise ConfigError(f"an image of {width}x{height} needs {need / 2**30:.3g} GiB for its "
                           f"float32 RGB buffer, more than this machine's "
-                          f"{have / 2**30:.1f} GiB of memory")
+                          f"{have / 2**30:.3g} GiB of memory")
 
 
 class _Clock:

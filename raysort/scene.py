@@ -141,7 +141,8 @@ def load_mesh(path):
         raise SceneError(f"mesh '{path}' does not exist" if not path.exists()
                          else f"mesh '{path}' is not a file")
     try:
-        mesh = trimesh.load(str(path), process=False)
+        with np.errstate(all="ignore"):       # garbage numbers are caught by check_mesh
+            mesh = trimesh.load(str(path), process=False)
     except Exception as exc:  # trimesh raises many types for corrupt files
         raise SceneError(f"mesh '{path}' is not a readable mesh file ({type(exc).__name__}: "
                          f"{exc})") from None
