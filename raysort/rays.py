@@ -44,7 +44,7 @@ def _real(name, value):
         arr = np.asarray(value)
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"{name} must be an array of numbers ({exc})") from None
-    if arr.dtype.kind not in "biuf":
+    if arr.dtype.kind not in "iuf":
         raise ConfigError(f"{name} must be numbers, got an array of {arr.dtype}")
     with np.errstate(over="ignore"):        # beyond float32: +-inf, an invalid ray
         return arr.astype(np.float32)
