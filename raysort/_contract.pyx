@@ -48,6 +48,10 @@ cpdef enum Bad:
     BAD_RAY                 # an active ray with a non-finite origin or direction (ray)
     BAD_NOT_FINITE          # a non-finite value                        (position)
     BAD_DESCENDING          # a[i] < a[i - 1]                           (position i)
+    BAD_PARENT_RANGE        # parent[i] outside [0, n)                  (path i)
+    BAD_PARENT_ORDER        # parent[i] < parent[i - 1]                 (path i)
+    BAD_WEIGHT              # a throughput or contribution not finite   (path i)
+    BAD_SLOT                # slot[i] outside [0, slots)                (path i)
 
 
 cdef inline Py_ssize_t block_end(Py_ssize_t start, Py_ssize_t n) noexcept nogil:
@@ -73,10 +77,10 @@ cdef Py_ssize_t large_packet(const int32_t *packets, Py_ssize_t n_big, int64_t j
 cdef int sort_kernel(const index_t *order, const index_t *offsets, Py_ssize_t n_sub,
                      const int32_t *packets, Py_ssize_t n_big, int64_t n, int64_t max_packet,
                      uint8_t *seen, Py_ssize_t *where) noexcept nogil:
-    cdef Py_ssize_t k, i, k_big
-    cdef int64_t a, b, lo, hi
-    cdef index_t j
-    cdef int bad
+    cdef Py_ssize_t k, i, k_big = 0
+    cdef int64_t a, b
+    cdef index_t j, lo, hi
+    cdef int bad, inside
     if offsets[0] != 0:
         return BAD_OFFSETS_START
     if offsets[n_sub] != n:
@@ -93,16 +97,16 @@ cdef int sort_kernel(const index_t *order, const index_t *offsets, Py_ssize_t n_
         if order[a] < 0 or order[a] >= n:
             where[0] = a
             return BAD_INDEX_RANGE
-        k_big = large_packet(packets, n_big, order[a])
+        if not (packets[k_big] <= order[a] < packets[k_big + 1]):   # usually the same one
+            k_big = large_packet(packets, n_big, order[a])
         lo, hi = packets[k_big], packets[k_big + 1]        # 0 <= lo <= order[a] < hi <= n
         bad = 0
-        for i in range(a, b):                              # all in this large packet
-            bad |= (order[i] < lo) | (order[i] >= hi)
-        if not bad:
-            for i in range(a, b):                          # each seen once
-                j = order[i]
-                bad |= seen[j]
-                seen[j] = 1
+        for i in range(a, b):       # in this large packet, and seen once (n: a spare slot)
+            j = order[i]
+            inside = (j >= lo) & (j < hi)
+            j = j if inside else <index_t> n
+            bad |= (not inside) | seen[j]
+            seen[j] = 1
         if bad:
             return sort_fault(order, a, b, lo, hi, n, seen, k, where)
     return 0
@@ -378,4 +382,85 @@ def finite(x):
         x64 = x
         with nogil:
             code = finite_kernel(&x64[0] if x64.shape[0] else NULL, x64.shape[0], &where)
+    return code, where
+
+
+# ---------------------------------------------------------------------------
+# a shader's next paths and shadow rays, in one pass
+# ---------------------------------------------------------------------------
+
+cdef inline int path_bad(const float *const *r, const int32_t *parent, const float *const *w,
+                         const int32_t *slot, Py_ssize_t i, uint32_t n, uint32_t slots,
+                         int tmin, int tmax) noexcept nogil:
+    cdef int bad = ray_bad(r[0][i], r[1][i], r[2][i], r[3][i], r[4][i], r[5][i], r[tmin][i],
+                           r[tmax][i])
+    bad |= <uint32_t> parent[i] >= n
+    bad |= (w[0][i] - w[0][i]) + (w[1][i] - w[1][i]) + (w[2][i] - w[2][i]) != 0
+    if slot != NULL:
+        bad |= <uint32_t> slot[i] >= slots
+    return bad
+
+
+cdef int paths_kernel(const float *const *r, const int32_t *parent, const float *const *w,
+                      const int32_t *slot, Py_ssize_t m, uint32_t n, uint32_t slots, int tmin,
+                      int tmax, Py_ssize_t *where) noexcept nogil:
+    cdef Py_ssize_t a = 0, b, i
+    cdef int bad
+    while a < m:
+        b = block_end(a, m)
+        bad = 0
+        if slot == NULL:
+            for i in range(a, b):
+                bad |= path_bad(r, parent, w, NULL, i, n, slots, tmin, tmax)
+        else:
+            for i in range(a, b):
+                bad |= path_bad(r, parent, w, slot, i, n, slots, tmin, tmax)
+        for i in range(a if a else 1, b):
+            bad |= parent[i] < parent[i - 1]
+        if bad:
+            for i in range(a, b):
+                where[0] = i
+                if ray_bad(r[0][i], r[1][i], r[2][i], r[3][i], r[4][i], r[5][i], r[tmin][i],
+                           r[tmax][i]):
+                    return BAD_RAY if r[tmin][i] >= 0 else BAD_TMIN
+                if <uint32_t> parent[i] >= n:
+                    return BAD_PARENT_RANGE
+                if i and parent[i] < parent[i - 1]:
+                    return BAD_PARENT_ORDER
+                if path_bad(r, parent, w, NULL, i, n, slots, tmin, tmax):
+                    return BAD_WEIGHT
+                if slot != NULL and <uint32_t> slot[i] >= slots:
+                    return BAD_SLOT
+        a = b
+    return 0
+
+
+def paths(const float[:, ::1] data, Py_ssize_t m, const int32_t[::1] parent,
+          const float[:, :] weight, slot, int64_t n, int64_t slots, int origin_row,
+          int direction_row, int tmin_row, int tmax_row):
+    """``m`` rays that continue paths (a shader's next bounce, or its shadow rays) in one
+    pass: each ray finite or marked invalid (see :func:`rays`); ``parent`` ascending in
+    ``[0, n)``; ``weight`` (3, m; rows contiguous) finite; ``slot`` (None, or int32)
+    in ``[0, slots)``."""
+    cdef Py_ssize_t where = 0
+    cdef int code, c
+    cdef const float *r[8]
+    cdef const float *w[3]
+    cdef const int32_t[::1] slot32
+    cdef const int32_t *slot_ptr = NULL
+    if m == 0:
+        return 0, 0
+    if weight.shape[0] != 3 or weight.shape[1] < m or weight.strides[1] != sizeof(float):
+        raise ValueError("weight must be (3, m) with contiguous rows")
+    for c in range(3):
+        r[c] = &data[origin_row + c, 0]
+        r[3 + c] = &data[direction_row + c, 0]
+        w[c] = &weight[c, 0]
+    r[6], r[7] = &data[tmin_row, 0], &data[tmax_row, 0]
+    if slot is not None:
+        slot32 = slot
+        slot_ptr = &slot32[0]
+    with nogil:
+        code = paths_kernel(r, &parent[0], w, slot_ptr, m, <uint32_t> n, <uint32_t> slots,
+                            6, 7, &where)      # r[6], r[7]: tmin, tmax
     return code, where

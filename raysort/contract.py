@@ -111,20 +111,6 @@ def _index_array(value, label, fail, *, length=None):
     return np.ascontiguousarray(arr, dtype=np.int64)
 
 
-def _real_array(value, label, shape, fail, dtype=np.float32):
-    """``value`` as a contiguous float array of ``shape`` with finite values."""
-    try:
-        arr = np.asarray(value)
-    except (TypeError, ValueError) as exc:
-        fail(f"{label} must be a float array of shape {shape} ({exc})")
-    if arr.shape != shape or arr.dtype.kind != "f":
-        fail(f"{label} must be a float array of shape {shape}, got {arr.dtype} with shape "
-             f"{arr.shape}")
-    arr = np.ascontiguousarray(arr, dtype=dtype)
-    _finite(arr, label, fail)
-    return arr
-
-
 def _finite(arr, label, fail):
     code, where = _contract.finite(arr.reshape(-1))
     if code:
@@ -330,40 +316,77 @@ def check_bounce(plugin, bounce, n, slots, radiance):
 
     ``parent`` must ascend, each in ``0..n-1``; rays are finite or marked
     invalid; throughput and contributions are finite float (3, m) arrays; shadow
-    rays' ``slot`` lie in ``0..slots-1``; ``radiance`` is still finite.
+    rays' ``slot`` lie in ``0..slots-1``; ``radiance`` is still finite.  Each part
+    is checked in one pass.
     """
     fail = _failer("shaders", plugin)
     _finite(radiance, "radiance", fail)
     if not isinstance(bounce, Bounce):
         fail(f"shade() must return raysort.paths.Bounce, got {type(bounce).__name__}")
-    _batch_layout(bounce.rays, "Bounce.rays", fail)
-    m = len(bounce.rays)
-    parent = _in_range(bounce.parent, "Bounce.parent", m, n, fail, ascending=True)
-    _rays(bounce.rays, "Bounce.rays", fail)
-    throughput = _real_array(bounce.throughput, "Bounce.throughput", (3, m), fail)
+    parent, _, throughput = _paths(bounce.rays, bounce.parent, None, bounce.throughput, n,
+                                   slots, "Bounce", "throughput", fail)
     shadow = bounce.shadow
     if shadow is not None:
         if not isinstance(shadow, ShadowRays):
             fail(f"Bounce.shadow must be raysort.paths.ShadowRays or None, got "
                  f"{type(shadow).__name__}")
-        _batch_layout(shadow.rays, "ShadowRays.rays", fail)
-        k = len(shadow.rays)
-        shadow = ShadowRays(
-            shadow.rays, _in_range(shadow.parent, "ShadowRays.parent", k, n, fail, ascending=True),
-            _in_range(shadow.slot, "ShadowRays.slot", k, slots, fail),
-            _real_array(shadow.contribution, "ShadowRays.contribution", (3, k), fail))
-        _rays(shadow.rays, "ShadowRays.rays", fail)
+        shadow = ShadowRays(shadow.rays, *_paths(shadow.rays, shadow.parent, shadow.slot,
+                                                 shadow.contribution, n, slots, "ShadowRays",
+                                                 "contribution", fail))
     return Bounce(bounce.rays, parent, throughput, shadow)
 
 
-def _in_range(value, label, length, hi, fail, ascending=False):
-    """An int32 index array of ``length`` entries in ``0..hi-1`` (ascending: parents, from
-    which the pipeline rebuilds packet boundaries)."""
-    arr = _index_array(value, label, fail, length=length)
-    code, i = _contract.index_array(arr, 0, hi, ascending)
-    if code == _BAD.BAD_INDEX_RANGE:
-        fail(f"{label}[{i}] = {arr[i]} is out of range 0..{hi - 1}")
-    if code == _BAD.BAD_DESCENDING:
-        fail(f"{label} must ascend, got {arr[i - 1]} then {arr[i]} at position {i}")
-    return arr.astype(np.int32, copy=False)
+def _paths(rays, parent, slot, weight, n, slots, label, weight_name, fail):
+    """Rays continuing paths, their parents (ascending in 0..n-1), slots (0..slots-1 or
+    None) and (3, m) weights, in one pass; returns (parent, slot, weight) as int32 and
+    float32 arrays."""
+    _batch_layout(rays, f"{label}.rays", fail)
+    m = len(rays)
+    parent = _int32(parent, f"{label}.parent", m, fail)
+    slot = None if slot is None else _int32(slot, f"{label}.slot", m, fail)
+    weight = _weights(weight, f"{label}.{weight_name}", m, fail)
+    code, i = _contract.paths(rays.data, m, parent, weight, slot, n, slots, _ORIGIN,
+                              _DIRECTION, _TMIN, _TMAX)
+    if code in (_BAD.BAD_TMIN, _BAD.BAD_RAY):
+        _rays(rays, f"{label}.rays", fail)
+    if code == _BAD.BAD_PARENT_RANGE:
+        fail(f"{label}.parent[{i}] = {parent[i]} is out of range 0..{n - 1}")
+    if code == _BAD.BAD_PARENT_ORDER:
+        fail(f"{label}.parent must ascend, got {parent[i - 1]} then {parent[i]} at position "
+             f"{i}")
+    if code == _BAD.BAD_WEIGHT:
+        fail(f"{label}.{weight_name}[:, {i}] is {weight[:, i].tolist()} (values must be "
+             f"finite)")
+    if code == _BAD.BAD_SLOT:
+        fail(f"{label}.slot[{i}] = {slot[i]} is out of range 0..{slots - 1}")
+    return parent, slot, weight
 
+
+def _int32(value, label, length, fail):
+    """A 1-d integer array of ``length`` entries as contiguous int32 (a value that does
+    not fit is out of every range the pipeline uses, and said so)."""
+    arr = _index_array(value, label, fail, length=length)
+    if arr.dtype != np.int32:
+        bad = np.flatnonzero((arr < np.iinfo(np.int32).min) | (arr > np.iinfo(np.int32).max))
+        if len(bad):
+            fail(f"{label}[{bad[0]}] = {arr[bad[0]]} is out of range")
+        arr = arr.astype(np.int32)
+    return arr
+
+
+def _weights(value, label, m, fail):
+    """A float (3, m) array as float32 with contiguous rows (lambert's slices need no copy);
+    a value beyond float32 becomes inf and fails the finiteness check."""
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as exc:
+        fail(f"{label} must be a float array of shape (3, {m}) ({exc})")
+    if arr.shape != (3, m) or arr.dtype.kind != "f":
+        fail(f"{label} must be a float array of shape (3, {m}), got {arr.dtype} with shape "
+             f"{arr.shape}")
+    if arr.dtype != np.float32:
+        with np.errstate(over="ignore"):
+            arr = arr.astype(np.float32)
+    if m and arr.strides[1] != arr.itemsize:
+        arr = np.ascontiguousarray(arr)
+    return arr
