@@ -36,6 +36,7 @@ _TMIN, _TMAX = RAY_ROWS.index("tmin"), RAY_ROWS.index("tmax")
 _ORIGIN, _DIRECTION = RAY_ROWS.index("ox"), RAY_ROWS.index("dx")     # three rows each
 _LANE_TMIN, _LANE_T = PACKET_ROWS.index("tmin"), PACKET_ROWS.index("t")
 _PACKET_ARRAYS = ("rows", "prim", "u", "v", "index", "starts", "counts")
+_COUNTER_FIELDS = tuple(f.name for f in fields(Counters) if f.name != "available")
 _KIND_WORD = {"generators": "generator", "sorters": "sorter", "traversals": "traversal",
               "shaders": "shader"}
 
@@ -289,13 +290,15 @@ def check_counters(plugin, counters):
     fail = _failer("traversals", plugin)
     if not isinstance(counters, Counters):
         fail(f"intersect() must return raysort.stats.Counters, got {type(counters).__name__}")
-    for f in fields(counters):
-        value = getattr(counters, f.name)
-        if f.name == "available":
-            if not isinstance(value, bool):
-                fail(f"Counters.available must be True or False, got {value!r}")
-        elif isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 0:
-            fail(f"Counters.{f.name} must be a whole number >= 0, got {value!r}")
+    for name in _COUNTER_FIELDS:
+        value = getattr(counters, name)
+        if type(value) is not int and (isinstance(value, bool)        # the common case first
+                                       or not isinstance(value, numbers.Integral)):
+            fail(f"Counters.{name} must be a whole number >= 0, got {value!r}")
+        if value < 0:
+            fail(f"Counters.{name} must be a whole number >= 0, got {value!r}")
+    if not isinstance(counters.available, bool):
+        fail(f"Counters.available must be True or False, got {counters.available!r}")
     return counters
 
 
