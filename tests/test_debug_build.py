@@ -28,8 +28,9 @@ except IndexError as exc:
 
 
 @pytest.mark.skipif(not DEBUG, reason="the installed build is not the bounds-checked one")
-def test_an_out_of_bounds_index_raises_index_error():
+def test_an_out_of_bounds_index_raises_index_error(tmp_path):
+    # from another directory: `python -c` in the checkout would import the source tree
     proc = subprocess.run([sys.executable, "-c", PROBE], capture_output=True, text=True,
-                          timeout=120)
+                          timeout=120, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith("IndexError:"), proc.stdout
