@@ -20,6 +20,9 @@ def _flag(name):
     return os.environ.get(name, "").strip().lower() in ("1", "yes", "true", "on")
 
 
+DEBUG = _flag("RAYSORT_DEBUG_CYTHON")
+
+
 def _compile_args():
     if os.name == "nt":
         return ["/O2", "/fp:precise"]
@@ -50,15 +53,26 @@ def _extensions():
 # override these and silently disable the bounds-checked build.
 directives = {
     "language_level": 3,
-    "boundscheck": _flag("RAYSORT_DEBUG_CYTHON"),
+    "boundscheck": DEBUG,
     "wraparound": False,
     "cdivision": True,
-    "initializedcheck": _flag("RAYSORT_DEBUG_CYTHON"),
+    "initializedcheck": DEBUG,
     "embedsignature": True,
 }
 
 JOBS = os.cpu_count() or 1
 MODE = "scalar" if _flag("RAYSORT_NO_SIMD") else "simd"
+
+
+def _directives_changed():
+    """cythonize regenerates a .c file only when its .pyx is newer and cannot see that the
+    directives changed (a bounds-checked build would reuse unchecked C): regenerate every
+    file when they differ from those of the last build here."""
+    stamp = HERE / "build" / "cython-directives"
+    changed = not stamp.exists() or stamp.read_text() != repr(sorted(directives.items()))
+    stamp.parent.mkdir(exist_ok=True)
+    stamp.write_text(repr(sorted(directives.items())))
+    return changed
 
 
 class BuildExt(build_ext):
@@ -79,7 +93,9 @@ class BuildExt(build_ext):
 
 setup(
     ext_modules=cythonize(_extensions(), compiler_directives=directives, include_path=["."],
-                          quiet=True, nthreads=JOBS if JOBS > 1 else 0),
+                          quiet=True, nthreads=JOBS if JOBS > 1 else 0,
+                          force=_directives_changed()),
     cmdclass={"build_ext": BuildExt},
-    options={"build_ext": {"parallel": JOBS, "build_temp": f"build/temp-{MODE}"}},
+    options={"build_ext": {"parallel": JOBS,
+                           "build_temp": f"build/temp-{MODE}{'-debug' if DEBUG else ''}"}},
 )

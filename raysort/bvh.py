@@ -13,11 +13,12 @@ import threading
 import numpy as np
 
 from raysort import _bvh
+from raysort.mesh import check_mesh
 from raysort.params import integer, number
 from raysort.rays import aligned_empty
-from raysort.errors import SceneError
 
-__all__ = ["BVH", "NODE_DTYPE", "NODE4_DTYPE", "TRI_DTYPE", "prepare_triangles"]
+__all__ = ["BVH", "NODE_DTYPE", "NODE4_DTYPE", "TRI_DTYPE", "prepare_triangles",
+           "degenerate_faces"]
 
 NODE_DTYPE = np.dtype([
     ("lo", "<f4", (3,)), ("hi", "<f4", (3,)),
@@ -34,30 +35,24 @@ TRI_DTYPE = np.dtype([
 assert NODE_DTYPE.itemsize == 32 and TRI_DTYPE.itemsize == 48 and NODE4_DTYPE.itemsize == 128
 
 
-def _check_mesh(vertices, faces):
-    vertices = np.ascontiguousarray(vertices, dtype=np.float32)
-    faces = np.ascontiguousarray(faces, dtype=np.int32)
-    if vertices.ndim != 2 or vertices.shape[1] != 3:
-        raise SceneError(f"vertices must have shape (n, 3), got {vertices.shape}")
-    if faces.ndim != 2 or faces.shape[1] != 3:
-        raise SceneError(f"faces must have shape (m, 3), got {faces.shape}")
-    if len(faces) == 0:
-        raise SceneError("the mesh has no faces")
-    if faces.min() < 0 or faces.max() >= len(vertices):
-        raise SceneError(f"face indices must lie in [0, {len(vertices)}), "
-                         f"found {faces.min()}..{faces.max()}")
-    if not np.isfinite(vertices).all():
-        bad = int(np.flatnonzero(~np.isfinite(vertices).all(axis=1))[0])
-        raise SceneError(f"vertex {bad} is not finite: {vertices[bad].tolist()}")
-    return vertices, faces
-
-
 def prepare_triangles(vertices, faces):
     """Triangles in input order as :data:`TRI_DTYPE` (what brute force tests)."""
-    vertices, faces = _check_mesh(vertices, faces)
+    vertices, faces = check_mesh(vertices, faces)
     tris = np.zeros(len(faces), dtype=TRI_DTYPE)
     _bvh.triangles(vertices, faces, tris.view(np.uint8).reshape(-1))
     return tris
+
+
+def degenerate_faces(vertices, faces):
+    """Indices of the degenerate faces, which are kept but never hit.
+
+    The rule is the triangle set-up's in ``raysort/_bvh.pyx`` (the sine of the
+    angle at the first vertex at most 2^-20, zero area included), which gives
+    such a triangle zero edges; this reads it back from there.
+    """
+    tris = prepare_triangles(vertices, faces)
+    flat = (tris["e1"] == 0).all(axis=1) & (tris["e2"] == 0).all(axis=1)
+    return np.flatnonzero(flat)
 
 
 class BVH:
@@ -92,7 +87,7 @@ class BVH:
         self.max_leaf = integer("max_leaf", max_leaf, 1, 65535)
         self.bins = integer("bins", bins, 1, 64)
         self.traversal_cost = number("traversal_cost", traversal_cost, 0, 1000, lo_open=True)
-        vertices, faces = _check_mesh(vertices, faces)
+        vertices, faces = check_mesh(vertices, faces)
         n = len(faces)
         nodes = np.zeros(2 * n, dtype=NODE_DTYPE)
         self.order = np.zeros(n, dtype=np.int32)
@@ -121,7 +116,7 @@ class BVH:
 
     def refit(self, vertices):
         """Move the triangles to new positions of the same vertices and refit the boxes."""
-        vertices, faces = _check_mesh(vertices, self.faces)
+        vertices, faces = check_mesh(vertices, self.faces)
         self.vertices = vertices
         _bvh.refit(vertices, faces, self.order, self.nodes.view(np.uint8).reshape(-1),
                    self.triangles.view(np.uint8).reshape(-1))

@@ -41,6 +41,32 @@ def _at_least(lo):
 _positive, _non_negative = _at_least(1), _at_least(0)
 
 
+def _seed(text):
+    """An argparse type: a seed, a whole number in 0..2**32-1 (the random numbers are keyed
+    on 32 bits, so a larger one would repeat another's image)."""
+    from raysort.pipeline import MAX_SEED
+
+    value = _non_negative(text)
+    if value > MAX_SEED:
+        raise argparse.ArgumentTypeError(f"expected a seed in 0..{MAX_SEED}, got {value}")
+    return value
+
+
+MAX_EXPOSURE = 64   # stops: 2**64 brightens the darkest float32 value past 1
+
+
+def _exposure(text):
+    """An argparse type: an exposure in stops, finite and within +-MAX_EXPOSURE."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of stops, got {text!r}")
+    if not -MAX_EXPOSURE <= value <= MAX_EXPOSURE:     # false for nan too
+        raise argparse.ArgumentTypeError(
+            f"expected stops in [-{MAX_EXPOSURE}, {MAX_EXPOSURE}], got {text!r}")
+    return value
+
+
 def _aov_names(text):
     """An argparse type: comma-separated AOV layer names."""
     from raysort.aov import parse_names
@@ -112,7 +138,12 @@ def cmd_render(args):
     if not out.lower().endswith(".exr"):
         raise ConfigError(f"the output must be an .exr file (a .png preview is written next "
                           f"to it), got {out!r}")
-    for path in (out, os.path.splitext(out)[0] + ".png", args.json):
+    png = os.path.splitext(out)[0] + ".png"
+    clash = [p for p in (out, png) if args.json
+             and os.path.realpath(args.json) == os.path.realpath(p)]
+    if clash:
+        raise ConfigError(f"--json {args.json!r} is the image {clash[0]!r}; give it another name")
+    for path in (out, png, args.json):
         if path:
             output.check_writable(path, parents=True)
     pipe = Pipeline(args.scene, generator=args.generator, sorter=args.sorter,
@@ -180,8 +211,16 @@ def _usable_cores():
 
 # --------------------------------------------------------------------------
 
+class _Parser(argparse.ArgumentParser):
+    """argparse whose errors are one line, ``raysort: error: ...``, exit status 2, like
+    every other error of the command."""
+
+    def error(self, message):
+        self.exit(2, f"raysort: error: {message} (see '{self.prog} --help')\n")
+
+
 def build_parser():
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="raysort", description="Ray sorting for fast incoherent packet ray tracing.")
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -193,7 +232,7 @@ def build_parser():
     r.add_argument("--spp", type=_positive, default=4, help="samples per pixel (4)")
     r.add_argument("--depth", type=_non_negative, default=None,
                    help="diffuse bounces after the primary hit (shader default: 2)")
-    r.add_argument("--seed", type=_non_negative, default=0, help="random seed (0)")
+    r.add_argument("--seed", type=_seed, default=0, help="random seed, 0..2**32-1 (0)")
     r.add_argument("--sorter", default="nah", help="sorter name or name:key=value,... (nah)")
     r.add_argument("--traversal", default="wide", help="traversal name or spec (wide)")
     r.add_argument("--generator", default="pinhole", help="generator name or spec (pinhole)")
@@ -203,7 +242,8 @@ def build_parser():
     r.add_argument("--threads", type=_positive, default=_usable_cores(),
                    help="worker threads (default: the usable cores, %(default)s here)")
     r.add_argument("--tile", type=_positive, default=32, help="tile edge in pixels (32)")
-    r.add_argument("--exposure", type=float, default=0.0, help="PNG exposure in stops (0)")
+    r.add_argument("--exposure", type=_exposure, default=0.0,
+                   help="PNG exposure in stops, -64..64 (0)")
     r.add_argument("-o", "--output", default="render.exr",
                    help="output .exr; missing directories are created (render.exr)")
     r.add_argument("--aov", type=_aov_names, default=[], metavar="LAYERS",

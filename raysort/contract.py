@@ -1,53 +1,395 @@
-"""Checks that plugins keep their contracts; a broken plugin is named in the error."""
+"""The contracts at every boundary of a frame, checked before anything reaches a kernel.
+
+Two kinds of input cross into raysort's C code:
+
+* **caller arguments** (``Pipeline.trace``'s ``rays`` and ``packets``); a
+  mistake raises :class:`~raysort.errors.ConfigError` naming the argument;
+* **plugin results** (a generator's rays, a sorter's order, a traversal's hits,
+  a shader's next bounce); a broken one raises
+  :class:`~raysort.errors.PluginContractError` naming the plugin, its
+  distribution and what was wrong.  So does a plugin method that raises.
+
+Each check reads its arrays once, in Cython (:mod:`raysort._contract`).  The
+pipeline runs the plugin checks on every plugin from outside raysort; raysort's
+own plugins that declare ``trusted = True`` skip them when
+``Pipeline(check_plugins=False)``.  Plugin authors can run the same checks in
+their tests (they are in :mod:`raysort.sdk`).
+"""
 from __future__ import annotations
+
+import numbers
+from dataclasses import fields
 
 import numpy as np
 
-from raysort.errors import PluginContractError
-from raysort.rays import MAX_PACKET
+from raysort import _contract
+from raysort.errors import ConfigError, PluginContractError, PluginError
+from raysort.paths import Bounce, ShadowRays
+from raysort.rays import MAX_PACKET, MAX_RAYS, PACKET_ROWS, RAY_ROWS, RayBatch
+from raysort.stats import Counters
 
-__all__ = ["check_sort"]
+__all__ = ["check_packets", "check_ray_batch", "check_sort", "check_hits", "check_counters",
+           "check_generated", "check_bounce", "call_plugin", "before_traversal", "plugin_error"]
+
+_BAD = _contract.Bad
+_TMIN, _TMAX = RAY_ROWS.index("tmin"), RAY_ROWS.index("tmax")
+_ORIGIN, _DIRECTION = RAY_ROWS.index("ox"), RAY_ROWS.index("dx")     # three rows each
+_LANE_TMIN, _LANE_T = PACKET_ROWS.index("tmin"), PACKET_ROWS.index("t")
+_PACKET_ARRAYS = ("rows", "prim", "u", "v", "index", "starts", "counts")
+_COUNTER_FIELDS = tuple(f.name for f in fields(Counters) if f.name != "available")
+_KIND_WORD = {"generators": "generator", "sorters": "sorter", "traversals": "traversal",
+              "shaders": "shader"}
 
 
-def check_sort(name, result, n, packets):
+# --------------------------------------------------------------------------
+# naming the culprit
+# --------------------------------------------------------------------------
+
+def _provenance(kind, name, cls):
+    """``(distribution, text)`` saying where a plugin comes from."""
+    from raysort import registry
+
+    for info in registry.list_plugins(kind):
+        if info.name == name:
+            if info.distribution == "<in-process>":
+                return info.distribution, "registered in process"
+            return info.distribution, f"from distribution '{info.distribution}' {info.version}"
+    if cls is None:
+        return None, "not a registered plugin"
+    from importlib import metadata
+
+    module = cls.__module__
+    dists = metadata.packages_distributions().get(module.partition(".")[0])
+    if dists:
+        return dists[0], f"from distribution '{dists[0]}'"
+    return None, f"defined in module '{module}', not an installed distribution"
+
+
+def plugin_error(kind, plugin, what, *, broke=True):
+    """A PluginContractError naming the plugin (an instance or a registered name)."""
+    if isinstance(plugin, str):
+        name, cls = plugin, None
+    else:
+        name, cls = getattr(plugin, "name", "") or type(plugin).__name__, type(plugin)
+    distribution, where = _provenance(kind, name, cls)
+    verb = "broke its contract" if broke else "failed"
+    return PluginContractError(f"{_KIND_WORD[kind]} {name!r} ({where}) {verb}: {what}",
+                               kind=kind, name=name, distribution=distribution)
+
+
+def call_plugin(kind, plugin, method, *args):
+    """``plugin.method(*args)``; an exception it raises becomes a PluginContractError
+    naming the plugin (the original is its ``__cause__``)."""
+    try:
+        return getattr(plugin, method)(*args)
+    except PluginError:
+        raise
+    except Exception as exc:
+        raise plugin_error(kind, plugin, f"{method}() raised {type(exc).__name__}: {exc}",
+                            broke=False) from exc
+
+
+# --------------------------------------------------------------------------
+# arrays
+# --------------------------------------------------------------------------
+
+def _index_array(value, label, fail, *, length=None):
+    """``value`` as a contiguous 1-d int32 or int64 array (no value changes)."""
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as exc:
+        fail(f"{label} must be a 1-d integer array ({exc})")
+    if arr.ndim == 1 and arr.size == 0:
+        arr = arr.astype(np.int32)                  # [] is an empty float array
+    if arr.ndim != 1 or arr.dtype.kind not in "iu":
+        fail(f"{label} must be a 1-d integer array, got {arr.dtype} with shape {arr.shape}")
+    if length is not None and len(arr) != length:
+        fail(f"{label} has {len(arr)} entries, expected {length}")
+    if arr.dtype == np.int32:
+        return np.ascontiguousarray(arr)
+    # int64 holds every other integer dtype but uint64, whose huge values turn negative
+    # here and so are still out of range
+    return np.ascontiguousarray(arr, dtype=np.int64)
+
+
+def _finite(arr, label, fail):
+    code, where = _contract.finite(arr.reshape(-1))
+    if code:
+        index = ", ".join(str(int(i)) for i in np.unravel_index(where, arr.shape))
+        fail(f"{label}[{index}] is {arr.reshape(-1)[where]} (values must be finite)")
+
+
+def _batch_layout(rays, label, fail):
+    """A RayBatch whose ``data`` is still the float32 (8, capacity) layout the kernels read."""
+    if not isinstance(rays, RayBatch):
+        fail(f"{label} must be a raysort.RayBatch, got {type(rays).__name__}")
+    data, n = getattr(rays, "data", None), getattr(rays, "n", None)
+    if not (isinstance(data, np.ndarray) and data.dtype == np.float32 and data.ndim == 2
+            and data.shape[0] == len(RAY_ROWS) and data.flags.c_contiguous):
+        fail(f"{label}.data must be a C-contiguous float32 array of {len(RAY_ROWS)} rows, got "
+             f"{getattr(data, 'dtype', type(data).__name__)} with shape "
+             f"{getattr(data, 'shape', None)}")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) \
+            or not 0 <= n <= min(data.shape[1], MAX_RAYS):
+        fail(f"{label} holds n={n!r} rays in a capacity of {data.shape[1]}")
+
+
+def _rays(rays, label, fail):
+    """Every ray finite or marked invalid (``not tmin < tmax``)."""
+    code, i = _contract.rays(rays.data, len(rays), _ORIGIN, _DIRECTION, _TMIN, _TMAX)
+    if code == _BAD.BAD_TMIN:
+        fail(f"{label} ray {i} has tmin = {rays.data[_TMIN, i]} < 0 (mark an unused ray "
+             f"invalid with tmin >= tmax)")
+    if code == _BAD.BAD_RAY:
+        origin = rays.data[_ORIGIN:_ORIGIN + 3, i].tolist()
+        direction = rays.data[_DIRECTION:_DIRECTION + 3, i].tolist()
+        fail(f"{label} ray {i} has origin {origin} and direction {direction}: not finite, yet "
+             f"not marked invalid (tmin >= tmax)")
+
+
+# --------------------------------------------------------------------------
+# caller arguments
+# --------------------------------------------------------------------------
+
+def _config_fail(msg):
+    raise ConfigError(msg)
+
+
+def check_ray_batch(rays, label="rays"):
+    """A caller's ray batch: a :class:`RayBatch` with its own layout (ConfigError)."""
+    if not isinstance(rays, RayBatch):
+        raise ConfigError(f"{label} must be a raysort.RayBatch (make one with "
+                          f"RayBatch.from_arrays(origins, directions)), got "
+                          f"{type(rays).__name__}")
+    _batch_layout(rays, label, _config_fail)
+    return rays
+
+
+def check_packets(packets, n):
+    """A caller's large-packet boundaries for ``n`` rays, as int32.
+
+    They must be integers that start at 0, never decrease and end at ``n``
+    (a repeated boundary is an empty large packet); ``n`` must fit int32 indices.
+    """
+    if n > MAX_RAYS:
+        raise ConfigError(f"a batch holds at most {MAX_RAYS} rays (int32 indices), got {n}")
+
+    arr = _index_array(packets, "packets", _config_fail)
+    if len(arr) == 0 or arr[0] != 0 or arr[-1] != n:
+        raise ConfigError(f"packets (large-packet boundaries) must start at 0 and end at {n}, "
+                          f"the number of rays; got {arr.tolist() if len(arr) < 8 else arr}")
+    code, i = _contract.index_array(arr, 0, n + 1, True)
+    if code:
+        raise ConfigError(f"packets must not decrease, got {arr[i - 1]} then {arr[i]} at "
+                          f"position {i}")
+    return arr.astype(np.int32, copy=False)
+
+
+# --------------------------------------------------------------------------
+# plugin results
+# --------------------------------------------------------------------------
+
+def _failer(kind, plugin):
+    def fail(msg):
+        raise plugin_error(kind, plugin, msg)
+    return fail
+
+
+def check_sort(plugin, result, n, packets):
     """Validate a sorter's ``(order, offsets)`` for ``n`` rays; returns them as int32 arrays.
 
-    ``order`` must be a permutation of ``range(n)``; ``offsets`` must start at
-    0, increase strictly, end at ``n``; each sub-packet must hold at most
-    4096 rays, all from one large packet.
+    ``plugin`` is the sorter or its name.  ``order`` must be a permutation of
+    ``range(n)``; ``offsets`` must start at 0, increase strictly and end at
+    ``n``; each sub-packet holds at most 4096 rays, all from one large packet
+    (``packets``: valid boundaries, see :func:`check_packets`).
     """
-    def fail(msg):
-        raise PluginContractError(f"sorter {name!r} broke its contract: {msg}",
-                                  kind="sorters", name=name)
-
+    fail = _failer("sorters", plugin)
     if not (isinstance(result, tuple) and len(result) == 2):
         fail(f"sort() must return (order, offsets), got {type(result).__name__}")
-    try:
-        order, offsets = (np.asarray(a) for a in result)
-    except (TypeError, ValueError) as exc:
-        fail(f"order and offsets must be 1-d integer arrays ({exc})")
-    for label, arr in (("order", order), ("offsets", offsets)):
-        if arr.ndim != 1 or not np.issubdtype(arr.dtype, np.integer):
-            fail(f"{label} must be a 1-d integer array, got {arr.dtype} with shape {arr.shape}")
-        if arr.size and arr.max() > np.iinfo(np.int32).max:
-            fail(f"{label} holds values beyond the int32 range")
-    order, offsets = order.astype(np.int64), offsets.astype(np.int64)
+    order = _index_array(result[0], "order", fail)
+    offsets = _index_array(result[1], "offsets", fail)
     if len(order) != n:
         fail(f"order has {len(order)} entries for {n} rays")
-    if n and (order.min() < 0 or order.max() >= n
-              or not (np.bincount(order, minlength=n) == 1).all()):
-        fail("order is not a permutation of the batch (an index is missing or repeated)")
-    if len(offsets) < 1 or offsets[0] != 0 or offsets[-1] != n:
-        fail(f"offsets must run from 0 to {n}")
-    sizes = np.diff(offsets)
-    if (sizes <= 0).any():
-        fail("offsets must increase strictly (no empty sub-packets)")
-    if len(sizes) and sizes.max() > MAX_PACKET:
-        fail(f"a sub-packet holds {sizes.max()} rays; the most a traversal takes is {MAX_PACKET}")
-    if n:
-        packet_of = np.searchsorted(np.asarray(packets), order, side="right") - 1
-        starts = offsets[:-1]
-        if not (np.minimum.reduceat(packet_of, starts)
-                == np.maximum.reduceat(packet_of, starts)).all():
-            fail("a sub-packet mixes rays of different large packets")
+    if len(offsets) < 1:
+        fail(f"offsets must run from 0 to {n}, got an empty array")
+    if order.dtype != offsets.dtype:
+        order, offsets = order.astype(np.int64), offsets.astype(np.int64)
+    packets = np.ascontiguousarray(packets, dtype=np.int32)
+    code, where = _contract.sort_result(order, offsets, packets, n, MAX_PACKET)
+    if code in (_BAD.BAD_OFFSETS_START, _BAD.BAD_OFFSETS_END, _BAD.BAD_OFFSETS_RANGE):
+        fail(f"offsets must run from 0 to {n}, got {offsets[0]}..{offsets[-1]}"
+             + (f" with {offsets[where + 1]} at position {where + 1}"
+                if code == _BAD.BAD_OFFSETS_RANGE else ""))
+    if code == _BAD.BAD_OFFSETS_ORDER:
+        fail(f"offsets must increase strictly (no empty sub-packets), got "
+             f"{offsets[where]} then {offsets[where + 1]} at position {where + 1}")
+    if code == _BAD.BAD_PACKET_SIZE:
+        fail(f"sub-packet {where} holds {offsets[where + 1] - offsets[where]} rays; the most "
+             f"a traversal takes is {MAX_PACKET}")
+    if code == _BAD.BAD_INDEX_RANGE:
+        fail(f"order is not a permutation of the batch: order[{where}] = {order[where]} is "
+             f"out of range 0..{n - 1}")
+    if code == _BAD.BAD_INDEX_REPEAT:
+        fail(f"order is not a permutation of the batch: ray {order[where]} appears twice "
+             f"(again at order[{where}])")
+    if code == _BAD.BAD_MIXED:
+        fail(f"sub-packet {where} mixes rays of different large packets")
     return order.astype(np.int32, copy=False), offsets.astype(np.int32, copy=False)
+
+
+def before_traversal(packets):
+    """What :func:`check_hits` compares with: take it after the gather, before the
+    traversal runs (the arrays, and a copy of the row ``t``, which holds each ray's tmax)."""
+    return (tuple(getattr(packets, name) for name in _PACKET_ARRAYS),
+            packets.rows[_LANE_T].copy())
+
+
+def check_hits(plugin, packets, before, order, offsets, n_prim, any_hit):
+    """Validate what a traversal wrote into ``packets``, gathered by ``order`` and
+    ``offsets`` (``before`` from :func:`before_traversal`).
+
+    Its arrays must be the ones it was given, unchanged in shape and type; each
+    lane must still hold its ray (padding lanes untouched); ``prim`` is -1 or a
+    triangle index below ``n_prim``; a closest hit has ``tmin < t < tmax`` and
+    finite ``u``, ``v`` (an invalid ray's interval is empty).
+    """
+    fail = _failer("traversals", plugin)
+    arrays, t0 = before
+    for name, array in zip(_PACKET_ARRAYS, arrays):
+        if getattr(packets, name, None) is not array:
+            fail(f"intersect() replaced packets.{name}; write into the arrays instead")
+    if any(a.shape != s or a.dtype != d for a, (s, d) in zip(arrays, _packet_shapes(packets))):
+        fail("intersect() reshaped or retyped an array of the packets")
+    rows, prim, u, v, index, starts, counts = arrays
+    code, lane = _contract.hits(rows, t0, prim, u, v, index, starts, counts, order, offsets,
+                                n_prim, any_hit, _LANE_TMIN, _LANE_T)
+    if code == _BAD.BAD_PADDING:
+        fail(f"it wrote into padding lane {lane}, which holds no ray")
+    if code == _BAD.BAD_LANE_INDEX:
+        fail(f"packets.index[{lane}] was changed to {index[lane]}")
+    if code == _BAD.BAD_PRIM:
+        fail(f"lane {lane}: prim = {prim[lane]} is neither -1 (a miss) nor a triangle index "
+             f"0..{n_prim - 1}")
+    if code == _BAD.BAD_T:
+        fail(f"lane {lane} (ray {index[lane]}): a hit at t = {rows[_LANE_T, lane]} outside "
+             f"the ray's interval ({rows[_LANE_TMIN, lane]}, {t0[lane]})")
+    if code == _BAD.BAD_UV:
+        fail(f"lane {lane}: a hit with u = {u[lane]}, v = {v[lane]} (must be finite)")
+
+
+def _packet_shapes(packets):
+    """(shape, dtype) of each array of freshly gathered ``packets``."""
+    capacity = packets.rows.shape[1]
+    return (((len(PACKET_ROWS), capacity), np.float32), ((capacity,), np.int32),
+            ((capacity,), np.float32), ((capacity,), np.float32), ((capacity,), np.int32),
+            ((packets.n_packets,), np.int32), ((packets.n_packets,), np.int32))
+
+
+def check_counters(plugin, counters):
+    """A traversal's :class:`Counters`: whole numbers >= 0 and a bool ``available``."""
+    fail = _failer("traversals", plugin)
+    if not isinstance(counters, Counters):
+        fail(f"intersect() must return raysort.stats.Counters, got {type(counters).__name__}")
+    for name in _COUNTER_FIELDS:
+        value = getattr(counters, name)
+        if type(value) is not int and (isinstance(value, bool)        # the common case first
+                                       or not isinstance(value, numbers.Integral)):
+            fail(f"Counters.{name} must be a whole number >= 0, got {value!r}")
+        if value < 0:
+            fail(f"Counters.{name} must be a whole number >= 0, got {value!r}")
+    if not isinstance(counters.available, bool):
+        fail(f"Counters.available must be True or False, got {counters.available!r}")
+    return counters
+
+
+def check_generated(plugin, rays, n):
+    """A generator's result: a :class:`RayBatch` of ``n`` rays, each finite or
+    marked invalid."""
+    fail = _failer("generators", plugin)
+    _batch_layout(rays, "generate() result", fail)
+    if len(rays) != n:
+        fail(f"generate() must return {n} rays (pixels x samples), got {len(rays)}")
+    _rays(rays, "generate() result", fail)
+    return rays
+
+
+def check_bounce(plugin, bounce, n, slots, radiance):
+    """A shader's :class:`Bounce` for ``n`` shaded rays whose paths add to
+    ``radiance`` rows ``0..slots-1``; returns it with arrays of the pipeline's types.
+
+    ``parent`` must ascend, each in ``0..n-1``; rays are finite or marked
+    invalid; throughput and contributions are finite float (3, m) arrays; shadow
+    rays' ``slot`` lie in ``0..slots-1``; ``radiance`` is still finite.  Each part
+    is checked in one pass.
+    """
+    fail = _failer("shaders", plugin)
+    _finite(radiance, "radiance", fail)
+    if not isinstance(bounce, Bounce):
+        fail(f"shade() must return raysort.paths.Bounce, got {type(bounce).__name__}")
+    parent, _, throughput = _paths(bounce.rays, bounce.parent, None, bounce.throughput, n,
+                                   slots, "Bounce", "throughput", fail)
+    shadow = bounce.shadow
+    if shadow is not None:
+        if not isinstance(shadow, ShadowRays):
+            fail(f"Bounce.shadow must be raysort.paths.ShadowRays or None, got "
+                 f"{type(shadow).__name__}")
+        shadow = ShadowRays(shadow.rays, *_paths(shadow.rays, shadow.parent, shadow.slot,
+                                                 shadow.contribution, n, slots, "ShadowRays",
+                                                 "contribution", fail))
+    return Bounce(bounce.rays, parent, throughput, shadow)
+
+
+def _paths(rays, parent, slot, weight, n, slots, label, weight_name, fail):
+    """Rays continuing paths, their parents (ascending in 0..n-1), slots (0..slots-1 or
+    None) and (3, m) weights, in one pass; returns (parent, slot, weight) as int32 and
+    float32 arrays."""
+    _batch_layout(rays, f"{label}.rays", fail)
+    m = len(rays)
+    parent = _int32(parent, f"{label}.parent", m, fail)
+    slot = None if slot is None else _int32(slot, f"{label}.slot", m, fail)
+    weight = _weights(weight, f"{label}.{weight_name}", m, fail)
+    code, i = _contract.paths(rays.data, m, parent, weight, slot, n, slots, _ORIGIN,
+                              _DIRECTION, _TMIN, _TMAX)
+    if code in (_BAD.BAD_TMIN, _BAD.BAD_RAY):
+        _rays(rays, f"{label}.rays", fail)
+    if code == _BAD.BAD_PARENT_RANGE:
+        fail(f"{label}.parent[{i}] = {parent[i]} is out of range 0..{n - 1}")
+    if code == _BAD.BAD_PARENT_ORDER:
+        fail(f"{label}.parent must ascend, got {parent[i - 1]} then {parent[i]} at position "
+             f"{i}")
+    if code == _BAD.BAD_WEIGHT:
+        fail(f"{label}.{weight_name}[:, {i}] is {weight[:, i].tolist()} (values must be "
+             f"finite)")
+    if code == _BAD.BAD_SLOT:
+        fail(f"{label}.slot[{i}] = {slot[i]} is out of range 0..{slots - 1}")
+    return parent, slot, weight
+
+
+def _int32(value, label, length, fail):
+    """A 1-d integer array of ``length`` entries as contiguous int32 (a value that does
+    not fit is out of every range the pipeline uses, and said so)."""
+    arr = _index_array(value, label, fail, length=length)
+    if arr.dtype != np.int32:
+        bad = np.flatnonzero((arr < np.iinfo(np.int32).min) | (arr > np.iinfo(np.int32).max))
+        if len(bad):
+            fail(f"{label}[{bad[0]}] = {arr[bad[0]]} is out of range")
+        arr = arr.astype(np.int32)
+    return arr
+
+
+def _weights(value, label, m, fail):
+    """A float (3, m) array as float32 with contiguous rows (lambert's slices need no copy);
+    a value beyond float32 becomes inf and fails the finiteness check."""
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as exc:
+        fail(f"{label} must be a float array of shape (3, {m}) ({exc})")
+    if arr.shape != (3, m) or arr.dtype.kind != "f":
+        fail(f"{label} must be a float array of shape (3, {m}), got {arr.dtype} with shape "
+             f"{arr.shape}")
+    if arr.dtype != np.float32:
+        with np.errstate(over="ignore"):
+            arr = arr.astype(np.float32)
+    if m and arr.strides[1] != arr.itemsize:
+        arr = np.ascontiguousarray(arr)
+    return arr

@@ -90,7 +90,7 @@ def mesh_pipeline(vertices, faces, **pipeline):
         Indices into `vertices`.
     **pipeline
         Keyword arguments of :class:`raysort.Pipeline` (``sorter``,
-        ``traversal``, ``threads``, ``tile``, ``bvh``, ...).  ``check_sorters``
+        ``traversal``, ``threads``, ``tile``, ``bvh``, ...).  ``check_plugins``
         defaults to False here: built-in sorters are trusted and skip the
         contract check (about 6% of a trace of random rays), while sorters
         from other packages are always checked.
@@ -103,7 +103,7 @@ def mesh_pipeline(vertices, faces, **pipeline):
         If a pipeline argument is not accepted.
     """
     entry = _entry(vertices, faces, pipeline.get("bvh"))
-    pipe = Pipeline(entry.scene, **{"check_sorters": False, **pipeline})
+    pipe = Pipeline(entry.scene, **{"check_plugins": False, **pipeline})
     with entry.lock:   # one build per mesh, however many threads ask at once
         pipe.bvh
     return pipe

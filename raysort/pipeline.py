@@ -21,6 +21,7 @@ How a render is organised (and why it is deterministic):
 """
 from __future__ import annotations
 
+import inspect
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor, as_completed
@@ -28,20 +29,28 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from raysort import registry
-from raysort.params import integer
-from raysort.contract import check_sort
-from raysort.errors import ConfigError, PluginContractError
-from raysort.paths import Bounce, Paths
+from raysort import contract, registry
+from raysort.bvh import BVH
+from raysort.errors import ConfigError
+from raysort.params import boolean, integer
+from raysort.paths import Paths
 from raysort.progress import with_rays
-from raysort.rays import Hits, RayBatch, gather, scatter, scatter_occluded
+from raysort.rays import MAX_RAYS, Hits, RayBatch, gather, scatter, scatter_occluded
 from raysort.scene import Scene, load_scene
 from raysort.stats import Counters
 
 __all__ = ["Pipeline", "RenderResult", "RenderStats", "Traced", "STAGES", "morton_order"]
 
-#: stage names used in timings, in pipeline order
+#: stage names used in timings, in pipeline order ("check": the contract checks)
 STAGES = ("generate", "sort", "check", "gather", "traverse", "scatter", "shade")
+#: most random-number seeds: the counter-based generator keys on 32 bits
+MAX_SEED = 2**32 - 1
+#: pixel indices are int32
+MAX_PIXELS = 2**31 - 1
+#: a path still bouncing after this many bounces means a shader that never ends its paths
+MAX_BOUNCES = 1024
+_BVH_PARAMETERS = tuple(p.name for p in inspect.signature(BVH).parameters.values()
+                        if p.kind == p.KEYWORD_ONLY)
 
 
 def morton_order(width, height):
@@ -222,16 +231,26 @@ class Pipeline:
         worker threads (tiles are shared out; the image does not change).
     batch_rays : int, default 16384
         about how many rays a worker keeps in flight (memory bound).
-    check_sorters : bool, default True
-        validate every sorter result; False skips the check for built-in
-        sorters marked trusted (third-party sorters are always checked).
+    check_plugins : bool, default True
+        check every plugin result against its contract (:mod:`raysort.contract`);
+        False skips the checks for raysort's own plugins marked trusted (plugins
+        from other packages are always checked).
     bvh : dict, optional
         BVH build parameters (``max_leaf``, ``bins``, ``traversal_cost``).
     """
 
     def __init__(self, scene=None, *, generator="pinhole", sorter="nah", traversal="wide",
-                 shader="lambert", tile=32, threads=1, batch_rays=16384, check_sorters=True,
+                 shader="lambert", tile=32, threads=1, batch_rays=16384, check_plugins=True,
                  bvh=None):
+        if not (scene is None or isinstance(scene, (Scene, str, os.PathLike))):
+            raise ConfigError(f"scene must be a Scene, a packaged scene name or a path to a "
+                              f".toml scene or mesh file, got {scene!r}")
+        if not (bvh is None or isinstance(bvh, dict)):
+            raise ConfigError(f"bvh must be a dict of BVH parameters, got {bvh!r}")
+        unread = sorted(set(bvh or {}) - set(_BVH_PARAMETERS))
+        if unread:
+            raise ConfigError(f"bvh: unknown parameter {unread[0]!r} (BVH takes: "
+                              f"{', '.join(_BVH_PARAMETERS)})")
         self.scene = scene if isinstance(scene, Scene) else load_scene(scene)
         self.generator = registry.create("generators", generator)
         self.sorter = registry.create("sorters", sorter)
@@ -239,8 +258,8 @@ class Pipeline:
         self.shader = registry.create("shaders", shader)
         self.tile = integer("tile", tile, 1, 64)
         self.threads = integer("threads", threads, 1)
-        self.batch_rays = integer("batch_rays", batch_rays, 1)
-        self.check_sorters = bool(check_sorters)
+        self.batch_rays = integer("batch_rays", batch_rays, 1, MAX_RAYS)
+        self.check_plugins = boolean("check_plugins", check_plugins)
         self.bvh_params = dict(bvh or {})
         self._bvh = None
 
@@ -248,11 +267,13 @@ class Pipeline:
     @property
     def bvh(self):
         if self._bvh is None:
-            try:
-                self._bvh = self.scene.bvh(**self.bvh_params)
-            except TypeError as exc:
-                raise ConfigError(f"bvh parameters: {exc}") from None
+            self._bvh = self.scene.bvh(**self.bvh_params)
         return self._bvh
+
+    def _checked(self, plugin):
+        """Whether the results of ``plugin`` are checked (always, unless trusted and
+        ``check_plugins`` is off)."""
+        return self.check_plugins or not _trusted(type(plugin))
 
     def describe(self):
         """Plugin names and parameters, for reports and file metadata."""
@@ -283,45 +304,54 @@ class Pipeline:
         -------
         (Hits or bool array, Counters)
         """
+        rays = contract.check_ray_batch(rays)
         n = len(rays)
+        any_hit = boolean("any_hit", any_hit)
+        threads = self.threads if threads is None else integer("threads", threads, 1)
+        if not (timings is None or isinstance(timings, dict)):
+            raise ConfigError(f"timings must be a dict or None, got {type(timings).__name__}")
         if packets is None:
             packets = np.append(np.arange(0, n, self.tile * self.tile), n)
-        packets = np.asarray(packets, dtype=np.int32)
+        packets = contract.check_packets(packets, n)
         clock = _Clock(timings)
         if n == 0:
             return (np.zeros(0, bool) if any_hit else Hits(0)), Counters()
-        result = self.sorter.sort(rays, packets, self.bvh.bounds)
+        result = contract.call_plugin("sorters", self.sorter, "sort", rays, packets.copy(),
+                                      self.bvh.bounds.copy())
         clock.lap("sort")
-        if self.check_sorters or not _trusted(type(self.sorter)):
-            order, offsets = check_sort(self.sorter.name, result, n, packets)
+        if self._checked(self.sorter):
+            order, offsets = contract.check_sort(self.sorter, result, n, packets)
             clock.lap("check")
         else:
             order, offsets = result
         batch = gather(rays, order, offsets)
         clock.lap("gather")
-        counters = self._intersect(batch, any_hit, self.threads if threads is None else threads)
+        before = contract.before_traversal(batch) if self._checked(self.traversal) else None
+        counters = self._intersect(batch, any_hit, threads)
         clock.lap("traverse")
+        if self._checked(self.traversal):
+            contract.check_hits(self.traversal, batch, before, order, offsets,
+                                len(self.bvh.faces), any_hit)
+            clock.lap("check")
         out = scatter_occluded(batch, n) if any_hit else scatter(batch, n)
         clock.lap("scatter")
         return out, counters
 
     def _intersect(self, batch, any_hit, threads=1):
+        def run(part):
+            return contract.call_plugin("traversals", self.traversal, "intersect", self.bvh,
+                                        part, any_hit)
+
         if threads > 1 and batch.n_packets > 1:
             cuts = np.linspace(0, batch.n_packets, min(threads, batch.n_packets) + 1).astype(int)
             with ThreadPoolExecutor(max_workers=len(cuts) - 1) as pool:
-                parts = list(pool.map(
-                    lambda ab: self.traversal.intersect(self.bvh, batch.slice(*ab), any_hit),
-                    zip(cuts[:-1], cuts[1:])))
+                parts = list(pool.map(lambda ab: run(batch.slice(*ab)),
+                                      zip(cuts[:-1], cuts[1:])))
         else:
-            parts = [self.traversal.intersect(self.bvh, batch, any_hit)]
+            parts = [run(batch)]
         total = Counters()
         for counters in parts:
-            if not isinstance(counters, Counters):
-                raise PluginContractError(
-                    f"traversal {self.traversal.name!r} broke its contract: intersect() must "
-                    f"return raysort.stats.Counters, got {type(counters).__name__}",
-                    kind="traversals", name=self.traversal.name)
-            total = total + counters
+            total = total + contract.check_counters(self.traversal, counters)
         return total
 
     # ------------------------------------------------------------------
@@ -338,7 +368,10 @@ class Pipeline:
         real render, e.g. for :mod:`raysort.workloads`.
         """
         width, height = integer("width", width, 1), integer("height", height, 1)
-        spp, seed = integer("spp", spp, 1), integer("seed", seed, 0)
+        spp, seed = integer("spp", spp, 1, MAX_RAYS), integer("seed", seed, 0, MAX_SEED)
+        if not (progress is None or callable(progress)):
+            raise ConfigError(f"progress must be a callable or None, got {progress!r}")
+        _check_image_size(width, height)
         collector = None
         if aov:
             from raysort.aov import AovCollector
@@ -347,7 +380,7 @@ class Pipeline:
             tap = collector if tap is None else _both(collector, tap)
         start = time.perf_counter()
         self.bvh  # build before the workers start
-        self.shader.prepare(self.scene)
+        contract.call_plugin("shaders", self.shader, "prepare", self.scene)
         tiles = [(x, y) for y in range(0, height, self.tile) for x in range(0, width, self.tile)]
         image = np.zeros((height, width, 3), dtype=np.float32)
         stats = RenderStats(threads=self.threads)
@@ -401,14 +434,13 @@ class Pipeline:
         for s0 in range(0, spp, per_batch):
             samples = np.arange(s0, min(spp, s0 + per_batch), dtype=np.int32)
             clock.lap(None)
-            rays = self.generator.generate(self.scene.camera, pixels, samples, width, height,
-                                           spp, seed)
+            rays = contract.call_plugin("generators", self.generator, "generate",
+                                        self.scene.camera, pixels.copy(), samples.copy(), width,
+                                        height, spp, seed)
             clock.lap("generate")
-            if not isinstance(rays, RayBatch) or len(rays) != n_pix * len(samples):
-                raise PluginContractError(
-                    f"generator {self.generator.name!r} broke its contract: expected a "
-                    f"RayBatch of {n_pix * len(samples)} rays, got {rays!r}",
-                    kind="generators", name=self.generator.name)
+            if self._checked(self.generator):
+                contract.check_generated(self.generator, rays, n_pix * len(samples))
+                clock.lap("check")
             paths = Paths(np.tile(pixels, len(samples)), np.repeat(samples, n_pix),
                           np.tile(slots, len(samples)))
             packets = np.arange(0, len(rays) + 1, n_pix, dtype=np.int32)
@@ -420,13 +452,13 @@ class Pipeline:
                 if tap is not None:
                     tap(Traced(tile, depth, False, rays, packets, hits, paths))
                 clock.lap(None)
-                bounce = self.shader.shade(self.scene, rays, hits, paths, depth, seed, radiance)
+                bounce = contract.call_plugin("shaders", self.shader, "shade", self.scene, rays,
+                                              hits, paths, depth, seed, radiance)
                 clock.lap("shade")
-                if not isinstance(bounce, Bounce):
-                    raise PluginContractError(
-                        f"shader {self.shader.name!r} broke its contract: shade() must return "
-                        f"raysort.paths.Bounce, got {type(bounce).__name__}",
-                        kind="shaders", name=self.shader.name)
+                if self._checked(self.shader):
+                    bounce = contract.check_bounce(self.shader, bounce, len(rays), n_pix,
+                                                   radiance)
+                    clock.lap("check")
                 if bounce.shadow is not None and len(bounce.shadow.rays):
                     self._trace_shadows(bounce.shadow, packets, radiance, stats, tap, tile,
                                         depth)
@@ -434,6 +466,9 @@ class Pipeline:
                 paths = paths.take(bounce.parent, bounce.throughput)
                 rays = bounce.rays
                 depth += 1
+                if depth > MAX_BOUNCES and len(rays):
+                    raise contract.plugin_error("shaders", self.shader, f"shade() still returns "
+                                                f"rays after {MAX_BOUNCES} bounces")
         return radiance, stats
 
     def _trace_shadows(self, shadow, packets, radiance, stats, tap=None, tile=None, depth=0):
@@ -459,9 +494,26 @@ def _both(first, second):
 
 
 def _trusted(cls):
-    """Only raysort's own sorters that declare ``trusted = True`` themselves may skip
-    the contract check; a subclass from elsewhere never inherits that trust."""
+    """Only raysort's own plugins that declare ``trusted = True`` themselves may skip
+    the contract checks; a subclass from elsewhere never inherits that trust."""
     return vars(cls).get("trusted") is True and cls.__module__.split(".")[0] == "raysort"
+
+
+def _check_image_size(width, height):
+    """ConfigError, before anything is allocated, for an image whose pixel indices
+    overflow int32 or whose float32 RGB buffer exceeds the machine's memory."""
+    if width * height > MAX_PIXELS:
+        raise ConfigError(f"an image of {width}x{height} has more than {MAX_PIXELS} pixels "
+                          f"(pixel indices are int32)")
+    need = width * height * 3 * np.dtype(np.float32).itemsize
+    try:
+        have = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):   # not on this platform
+        return
+    if need > have:
+        raise ConfigError(f"an image of {width}x{height} needs {need / 2**30:.3g} GiB for its "
+                          f"float32 RGB buffer, more than this machine's "
+                          f"{have / 2**30:.3g} GiB of memory")
 
 
 class _Clock:

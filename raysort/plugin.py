@@ -25,6 +25,10 @@ class Plugin:
     kind = ""
     #: the registered name, set by the registry when the class is loaded
     name = ""
+    #: raysort's own plugins set this to skip the checks of their results when
+    #: ``Pipeline(check_plugins=False)``; it is not inherited and has no effect on
+    #: plugins from other packages, which are always checked (raysort.contract)
+    trusted = False
 
     @classmethod
     def parameter_names(cls):
@@ -84,14 +88,11 @@ class Sorter(Plugin):
     of ``range(len(rays))`` and ``offsets`` int32 sub-packet boundaries
     (``offsets[0] == 0``, strictly increasing, ``offsets[-1] == len(rays)``);
     sub-packet k is ``order[offsets[k]:offsets[k+1]]`` and its rays must all
-    come from one large packet.  The framework checks this contract.
+    come from one large packet.  The framework checks this contract
+    (:func:`raysort.contract.check_sort`).
     """
 
     kind = "sorters"
-    #: raysort's own sorters set this to skip the contract check when
-    #: ``Pipeline(check_sorters=False)``; it is not inherited and has no effect
-    #: on sorters from other packages, which are always checked
-    trusted = False
 
     def sort(self, rays, packets, bounds):
         """Order a batch.

@@ -45,11 +45,11 @@ parameter and its allowed range when one has a wrong type or value.
 from collections import namedtuple
 from dataclasses import dataclass
 import math
-import numbers
 
 import numpy as np
 
-from .errors import ConfigError
+from raysort.mesh import check_mesh, per_face
+from raysort.params import integer, number
 
 __all__ = [
     "MeshData",
@@ -87,7 +87,8 @@ class MeshData:
     emission : ndarray of float32, shape (F, 3), or None
         Per-face emitted radiance (``>= 0``); None means no emission.
 
-    Arrays are converted to the dtypes above on construction and checked.
+    Arrays are converted to the dtypes above on construction and checked by
+    :mod:`raysort.mesh` (a bad mesh is a :class:`raysort.errors.SceneError`).
     """
 
     vertices: np.ndarray
@@ -96,29 +97,13 @@ class MeshData:
     emission: np.ndarray = None
 
     def __post_init__(self):
-        v = np.ascontiguousarray(self.vertices, dtype=np.float32)
-        f = np.ascontiguousarray(self.faces, dtype=np.int32)
-        if v.ndim != 2 or v.shape[1] != 3:
-            raise ConfigError(f"MeshData: vertices must have shape (V, 3); got {v.shape}")
-        if f.ndim != 2 or f.shape[1] != 3:
-            raise ConfigError(f"MeshData: faces must have shape (F, 3); got {f.shape}")
-        if not np.isfinite(v).all():
-            raise ConfigError("MeshData: vertices must all be finite")
-        if f.size and (f.min() < 0 or f.max() >= len(v)):
-            raise ConfigError(f"MeshData: faces must index vertices in [0, {len(v)})")
-        object.__setattr__(self, "vertices", v)
-        object.__setattr__(self, "faces", f)
-        for name, lo, hi in (("albedo", 0.0, 1.0), ("emission", 0.0, math.inf)):
-            a = getattr(self, name)
-            if a is None:
-                continue
-            a = np.ascontiguousarray(a, dtype=np.float32)
-            if a.shape != (len(f), 3):
-                raise ConfigError(
-                    f"MeshData: {name} must have shape ({len(f)}, 3); got {a.shape}")
-            if not (np.isfinite(a).all() and (a >= lo).all() and (a <= hi).all()):
-                raise ConfigError(f"MeshData: {name} must lie in [{lo}, {hi}]")
-            object.__setattr__(self, name, a)
+        vertices, faces = check_mesh(self.vertices, self.faces, "MeshData")
+        object.__setattr__(self, "vertices", vertices)
+        object.__setattr__(self, "faces", faces)
+        for name, hi in (("albedo", 1.0), ("emission", math.inf)):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, per_face(name, getattr(self, name), len(faces),
+                                                        0.0, hi, "MeshData"))
 
     @property
     def n_vertices(self):
@@ -129,30 +114,6 @@ class MeshData:
     def n_faces(self):
         """Number of triangles."""
         return len(self.faces)
-
-
-# ---------------------------------------------------------------------------
-# Parameter checks
-# ---------------------------------------------------------------------------
-
-def _int_param(func, name, value, lo, hi):
-    if (isinstance(value, bool) or not isinstance(value, numbers.Integral)
-            or not lo <= value <= hi):
-        raise ConfigError(
-            f"{func}: {name} must be an integer in [{lo}, {hi}]; got {value!r}")
-    return int(value)
-
-
-def _float_param(func, name, value, lo, hi, *, lo_open=False):
-    ok = (not isinstance(value, bool) and isinstance(value, numbers.Real)
-          and math.isfinite(value)
-          and (lo < value if lo_open else lo <= value) and value <= hi)
-    if not ok:
-        left = "(" if lo_open else "["
-        raise ConfigError(
-            f"{func}: {name} must be a finite number in {left}{lo:g}, {hi:g}]; "
-            f"got {value!r}")
-    return float(value)
 
 
 # ---------------------------------------------------------------------------
@@ -365,9 +326,8 @@ def icosphere(*, radius=1.0, subdivisions=2):
     MeshData
         With ``albedo=None`` and ``emission=None``.
     """
-    radius = _float_param("icosphere", "radius", radius, 0.0, 1e6, lo_open=True)
-    subdivisions = _int_param("icosphere", "subdivisions", subdivisions,
-                              0, MAX_SUBDIVISIONS)
+    radius = number("icosphere: radius", radius, 0.0, 1e6, lo_open=True)
+    subdivisions = integer("icosphere: subdivisions", subdivisions, 0, MAX_SUBDIVISIONS)
     return _concat([_icosphere_part(radius, subdivisions)])
 
 
@@ -394,11 +354,10 @@ def furnace_sphere(*, radius=1.0, subdivisions=3, albedo=0.5, emission=1.0):
     -------
     MeshData
     """
-    radius = _float_param("furnace_sphere", "radius", radius, 0.0, 1e6, lo_open=True)
-    subdivisions = _int_param("furnace_sphere", "subdivisions", subdivisions,
-                              0, MAX_SUBDIVISIONS)
-    albedo = _float_param("furnace_sphere", "albedo", albedo, 0.0, 1.0)
-    emission = _float_param("furnace_sphere", "emission", emission, 0.0, 1e6)
+    radius = number("furnace_sphere: radius", radius, 0.0, 1e6, lo_open=True)
+    subdivisions = integer("furnace_sphere: subdivisions", subdivisions, 0, MAX_SUBDIVISIONS)
+    albedo = number("furnace_sphere: albedo", albedo, 0.0, 1.0)
+    emission = number("furnace_sphere: emission", emission, 0.0, 1e6)
     sphere = _icosphere_part(radius, subdivisions)
     n = len(sphere.faces)
     return _concat([sphere._replace(albedo=np.full((n, 3), albedo),
@@ -440,7 +399,7 @@ def cornell_box(*, light=15.0):
     -------
     MeshData
     """
-    light = _float_param("cornell_box", "light", light, 0.0, 1e6)
+    light = number("cornell_box: light", light, 0.0, 1e6)
     room = _box((0.5, 0.5, 0.5), (1.0, 1.0, 1.0))
     walls = [_NEG_X, _POS_X, _NEG_Y, _POS_Y, _NEG_Z]          # no front (+z)
     wall_colors = [_RED, _GREEN, _WHITE, _WHITE, _WHITE]
@@ -476,8 +435,8 @@ def plane_under_sky(*, size=100.0, albedo=0.5):
     -------
     MeshData
     """
-    size = _float_param("plane_under_sky", "size", size, 0.0, 1e6, lo_open=True)
-    albedo = _float_param("plane_under_sky", "albedo", albedo, 0.0, 1.0)
+    size = number("plane_under_sky: size", size, 0.0, 1e6, lo_open=True)
+    albedo = number("plane_under_sky: albedo", albedo, 0.0, 1.0)
     square = _box((0.0, 0.0, 0.0), (size, 0.0, size))[_POS_Y]
     return _concat([_quad(square, (albedo, albedo, albedo))])
 
@@ -660,10 +619,10 @@ def forest(*, seed=1, trees=90, leaves_per_tree=780, size=60.0):
     -------
     MeshData
     """
-    seed = _int_param("forest", "seed", seed, 0, 2**63 - 1)
-    trees = _int_param("forest", "trees", trees, 0, 1000)
-    leaves_per_tree = _int_param("forest", "leaves_per_tree", leaves_per_tree, 0, 10000)
-    size = _float_param("forest", "size", size, 10.0, 10000.0)
+    seed = integer("forest: seed", seed, 0, 2**63 - 1)
+    trees = integer("forest: trees", trees, 0, 1000)
+    leaves_per_tree = integer("forest: leaves_per_tree", leaves_per_tree, 0, 10000)
+    size = number("forest: size", size, 10.0, 10000.0)
 
     rng = np.random.default_rng(seed)
     height = _ground_height(rng)

@@ -20,6 +20,8 @@ can use aligned 4-wide loads on lanes ``[4k, 4k + 4)``.
 """
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 
 from raysort import _gather
@@ -31,6 +33,21 @@ RAY_ROWS = ("ox", "oy", "oz", "dx", "dy", "dz", "tmin", "tmax")
 PACKET_ROWS = ("ox", "oy", "oz", "dx", "dy", "dz", "ix", "iy", "iz", "tmin", "t")
 ALIGN = 16
 MAX_PACKET = 4096  # RS_MAX_PACKET in include/raysort/types.h
+#: most rays in one batch: ray indices, offsets and packet boundaries are int32, and the
+#: capacity (rounded up to a multiple of 4) must fit too
+MAX_RAYS = 2**31 - 4
+
+
+def _real(name, value):
+    """``value`` as a float32 array, if it holds real numbers (ConfigError otherwise)."""
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{name} must be an array of numbers ({exc})") from None
+    if arr.dtype.kind not in "iuf":
+        raise ConfigError(f"{name} must be numbers, got an array of {arr.dtype}")
+    with np.errstate(over="ignore"):        # beyond float32: +-inf, an invalid ray
+        return arr.astype(np.float32)
 
 
 def _round4(n):
@@ -57,9 +74,9 @@ class RayBatch:
     __slots__ = ("data", "n")
 
     def __init__(self, n):
+        if isinstance(n, bool) or not isinstance(n, numbers.Integral) or not 0 <= n <= MAX_RAYS:
+            raise ConfigError(f"a ray batch holds 0..{MAX_RAYS} rays, got {n!r}")
         n = int(n)
-        if n < 0:
-            raise ConfigError(f"a ray batch needs n >= 0 rays, got {n}")
         self.n = n
         self.data = aligned_empty((8, max(_round4(n), 4)), np.float32)
         self.data[:] = 0.0
@@ -68,14 +85,27 @@ class RayBatch:
 
     @classmethod
     def from_arrays(cls, origins, directions, tmin=0.0, tmax=np.inf):
-        """Rays from ``(n, 3)`` origins and directions; tmin/tmax scalar or ``(n,)``."""
-        origins = np.asarray(origins, dtype=np.float32)
-        directions = np.asarray(directions, dtype=np.float32)
+        """Rays from ``(n, 3)`` origins and directions; tmin/tmax scalar or ``(n,)``.
+
+        Any real values are accepted (a ray that is not finite, or has not
+        ``0 <= tmin < tmax``, is invalid and never hits); the arrays must be
+        numbers of matching shapes (ConfigError otherwise).
+        """
+        origins = _real("origins", origins)
+        directions = _real("directions", directions)
         if origins.ndim != 2 or origins.shape[1] != 3 or directions.shape != origins.shape:
             raise ConfigError(
                 f"origins and directions must both have shape (n, 3), got "
                 f"{origins.shape} and {directions.shape}")
-        batch = cls(len(origins))
+        n = len(origins)
+        if n > MAX_RAYS:
+            raise ConfigError(f"a batch holds at most {MAX_RAYS} rays (int32 indices), got {n}")
+        tmin, tmax = _real("tmin", tmin), _real("tmax", tmax)
+        for name, value in (("tmin", tmin), ("tmax", tmax)):
+            if value.shape not in ((), (n,)):
+                raise ConfigError(f"{name} must be one number or one per ray ({n}), got shape "
+                                  f"{value.shape}")
+        batch = cls(n)
         batch.origins[:] = origins.T
         batch.directions[:] = directions.T
         batch.tmin[:] = tmin

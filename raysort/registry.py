@@ -260,21 +260,40 @@ def create(kind, config):
     return obj
 
 
+_WORDS = {"true": True, "false": False, "none": None, "null": None}
+
+
 def parse_spec(spec):
     """``"name:key=value,key=value"`` -> ``{"type": name, key: value, ...}``.
 
     Values are Python literals where they parse as one (``1024``, ``0.25``,
-    ``True``), else strings.
+    ``True``), the words ``true``, ``false`` and ``none`` in any case (as in
+    TOML and on the command line), else strings.  An empty item (``a=1,,b=2``),
+    a repeated key or a missing name is an error.
     """
-    name, _, rest = spec.partition(":")
+    if not isinstance(spec, str):
+        raise ConfigError(f"a plugin spec is a string 'name:key=value,...', got {spec!r}")
+    name, colon, rest = spec.partition(":")
     config = {"type": name.strip()}
-    for item in filter(None, (s.strip() for s in rest.split(","))):
+    if not config["type"]:
+        raise ConfigError(f"cannot read {spec!r}: expected a plugin name before ':'")
+    items = rest.split(",") if colon and rest.strip() else []
+    for item in (s.strip() for s in items):
         key, eq, value = item.partition("=")
-        if not eq or not key.strip().isidentifier():
-            raise ConfigError(f"cannot read {item!r} in {spec!r}: expected key=value")
-        try:
-            config[key.strip()] = ast.literal_eval(value.strip())
-        except (ValueError, SyntaxError):
-            config[key.strip()] = value.strip()
+        key = key.strip()
+        if not eq or not key.isidentifier():
+            raise ConfigError(f"cannot read {item!r} in {spec!r}: expected key=value"
+                              + (" (an empty item between commas)" if not item else ""))
+        if key in config:
+            raise ConfigError(f"cannot read {spec!r}: {key!r} is given twice")
+        config[key] = _value(value.strip())
     return config
 
+
+def _value(text):
+    if text.lower() in _WORDS:
+        return _WORDS[text.lower()]
+    try:
+        return ast.literal_eval(text)
+    except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):
+        return text

@@ -22,10 +22,11 @@ from pathlib import Path
 import numpy as np
 
 from raysort import procedural
-from raysort.params import vector3
-from raysort.bvh import BVH
+from raysort.bvh import BVH, degenerate_faces
 from raysort.camera import Camera
 from raysort.errors import ConfigError, SceneError
+from raysort.mesh import check_mesh, per_face
+from raysort.params import vector3
 
 try:
     import tomllib
@@ -40,10 +41,19 @@ DEFAULT_ALBEDO = (0.7, 0.7, 0.7)
 
 @dataclass(frozen=True)
 class PointLight:
-    """A point light for shadow rays: ``intensity`` in radiant intensity units."""
+    """A point light for shadow rays: ``intensity`` in radiant intensity units (3
+    numbers >= 0); ConfigError otherwise."""
 
     position: tuple
     intensity: tuple
+
+    def __post_init__(self):
+        position = vector3("light.position", self.position)
+        intensity = vector3("light.intensity", self.intensity)
+        if (intensity < 0).any():
+            raise ConfigError(f"light.intensity must not be negative, got {self.intensity!r}")
+        object.__setattr__(self, "position", tuple(position.tolist()))
+        object.__setattr__(self, "intensity", tuple(intensity.tolist()))
 
 
 @dataclass
@@ -72,20 +82,26 @@ class Scene:
     _bvh_params: dict = field(default=None, repr=False)
 
     def __post_init__(self):
-        self.vertices, self.faces = _checked_geometry(self.vertices, self.faces, self.source
-                                                      or self.name)
+        where = self.source or self.name
+        self.vertices, self.faces = check_mesh(self.vertices, self.faces, where)
         m = len(self.faces)
-        self.albedo = _per_face("albedo", self.albedo, m, 0.0, 1.0)
-        self.emission = _per_face("emission", self.emission, m, 0.0, np.inf)
-        self.sky = np.asarray(self.sky, dtype=np.float32).reshape(3)
+        self.albedo = per_face("albedo", self.albedo, m, 0.0, 1.0, where)
+        self.emission = per_face("emission", self.emission, m, 0.0, np.inf, where)
+        self.sky = per_face("sky", self.sky, 1, 0.0, np.inf, where).reshape(3)
+        if not isinstance(self.camera, Camera):
+            raise SceneError(f"scene '{where}': camera must be a raysort.Camera, got "
+                             f"{type(self.camera).__name__}")
+        self.lights = list(self.lights)
+        if not all(isinstance(light, PointLight) for light in self.lights):
+            raise SceneError(f"scene '{where}': lights must be raysort.scene.PointLight")
 
     @classmethod
     def from_mesh(cls, vertices, faces, *, camera=None, albedo=DEFAULT_ALBEDO, emission=0.0,
                   sky=(1.0, 1.0, 1.0), lights=(), name="mesh"):
         """A scene from arrays; the camera defaults to one framing the mesh."""
-        vertices = np.asarray(vertices, dtype=np.float32)
+        vertices, faces = check_mesh(vertices, faces, name)
         if camera is None:
-            camera = Camera.framing(vertices.min(axis=0), vertices.max(axis=0))
+            camera = _framing(vertices, name)
         return cls(vertices, faces, albedo, emission, camera, sky, list(lights), name, name)
 
     @property
@@ -108,17 +124,9 @@ class Scene:
         return np.ascontiguousarray(nrm, dtype=np.float32)
 
     def degenerate_faces(self):
-        """Indices of degenerate faces: kept, but never hit.
-
-        A face is degenerate when the sine of its angle at the first vertex
-        is at most 2^-20 (|e1 x e2|^2 <= 2^-40 |e1|^2 |e2|^2 in double), which
-        includes every face of zero area; see raysort/_bvh.pyx.
-        """
-        v = self.vertices.astype(np.float64)[self.faces]
-        e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
-        cross = np.cross(e1, e2)
-        return np.flatnonzero((cross * cross).sum(axis=1) <= 2.0 ** -40
-                              * (e1 * e1).sum(axis=1) * (e2 * e2).sum(axis=1))
+        """Indices of degenerate faces: kept, but never hit (see
+        :func:`raysort.bvh.degenerate_faces` for the rule)."""
+        return degenerate_faces(self.vertices, self.faces)
 
     def bvh(self, **params):
         """The scene's BVH (see :class:`raysort.bvh.BVH` for ``params``), built on first
@@ -127,35 +135,6 @@ class Scene:
             self._bvh = BVH(self.vertices, self.faces, **params)
             self._bvh_params = dict(params)
         return self._bvh
-
-
-def _checked_geometry(vertices, faces, where):
-    vertices = np.ascontiguousarray(vertices, dtype=np.float32)
-    faces = np.ascontiguousarray(faces, dtype=np.int32)
-    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
-        raise SceneError(f"mesh '{where}' has no triangle faces")
-    if vertices.ndim != 2 or vertices.shape[1] != 3:
-        raise SceneError(f"mesh '{where}': vertices have shape {vertices.shape}, not (n, 3)")
-    if faces.min() < 0 or faces.max() >= len(vertices):
-        raise SceneError(f"mesh '{where}': face indices out of range 0..{len(vertices) - 1}")
-    finite = np.isfinite(vertices).all(axis=1)
-    if not finite.all():
-        bad = np.flatnonzero(~finite)
-        raise SceneError(f"mesh '{where}': {len(bad)} vertices are not finite "
-                         f"(first: vertex {bad[0]} = {vertices[bad[0]].tolist()})")
-    return vertices, faces
-
-
-def _per_face(what, value, m, lo, hi):
-    arr = np.asarray(value, dtype=np.float32)
-    if arr.ndim <= 1:
-        arr = np.broadcast_to(arr.reshape(-1)[:3] if arr.size >= 3 else arr, (m, 3))
-    if arr.shape != (m, 3):
-        raise SceneError(f"{what} must be 3 numbers or one row of 3 per face, got shape "
-                         f"{np.shape(value)}")
-    if np.isnan(arr).any() or (arr < lo).any() or (arr > hi).any():
-        raise SceneError(f"{what} values must lie in [{lo}, {hi}]")
-    return np.ascontiguousarray(arr, dtype=np.float32)
 
 
 # --------------------------------------------------------------------------
@@ -171,9 +150,11 @@ def load_mesh(path):
         raise SceneError(f"mesh '{path}' does not exist" if not path.exists()
                          else f"mesh '{path}' is not a file")
     try:
-        mesh = trimesh.load(str(path), process=False)
+        with np.errstate(all="ignore"):       # garbage numbers are caught by check_mesh
+            mesh = trimesh.load(str(path), process=False)
     except Exception as exc:  # trimesh raises many types for corrupt files
-        raise SceneError(f"cannot read mesh '{path}': {exc}") from None
+        raise SceneError(f"mesh '{path}' is not a readable mesh file ({type(exc).__name__}: "
+                         f"{exc})") from None
     if isinstance(mesh, trimesh.Scene):
         geoms = [g for g in mesh.dump() if isinstance(g, trimesh.Trimesh)]
         if not geoms:
@@ -188,7 +169,7 @@ def load_mesh(path):
     elif getattr(visual, "kind", None) == "vertex":
         vc = np.asarray(visual.vertex_colors)[:, :3].astype(np.float64)
         colors = np.rint(vc[np.asarray(mesh.faces)].mean(axis=1)).astype(np.uint8)
-    vertices, faces = _checked_geometry(mesh.vertices, mesh.faces, path)
+    vertices, faces = check_mesh(mesh.vertices, mesh.faces, path)
     return vertices, faces, colors
 
 
@@ -235,6 +216,14 @@ def load_scene(spec=None):
     vertices, faces, colors = load_mesh(path)
     albedo = colors / 255.0 if colors is not None else DEFAULT_ALBEDO
     return Scene.from_mesh(vertices, faces, albedo=albedo, name=path.stem)
+
+
+def _framing(vertices, where):
+    """The default camera: it sees the whole mesh."""
+    try:
+        return Camera.framing(vertices.min(axis=0), vertices.max(axis=0))
+    except ConfigError as exc:
+        raise SceneError(f"mesh '{where}' cannot be framed by a camera: {exc}") from None
 
 
 def _check_keys(where, section, table):
@@ -336,15 +325,17 @@ def _load_scene_file(path):
 
     cam_cfg = doc.get("camera") or default_camera
     if cam_cfg is None:
-        camera = Camera.framing(vertices.min(axis=0), vertices.max(axis=0))
+        camera = _framing(vertices, where)
     else:
         try:
             camera = Camera(**cam_cfg)
         except (ConfigError, TypeError) as exc:
             raise SceneError(f"scene file '{where}': camera: {exc}") from None
-    lights = [PointLight(tuple(_number3(where, "light.position", lt.get("position"))),
-                         tuple(_non_negative3(where, "light.intensity", lt.get("intensity"))))
-              for lt in _tables(where, doc, "light")]
+    try:
+        lights = [PointLight(lt.get("position"), lt.get("intensity"))
+                  for lt in _tables(where, doc, "light")]
+    except ConfigError as exc:
+        raise SceneError(f"scene file '{where}': {exc}") from None
     sky = _non_negative3(where, "sky.radiance", doc.get("sky", {}).get("radiance", (0, 0, 0)))
     try:
         return Scene(vertices, faces, albedo, emission, camera, sky, lights,

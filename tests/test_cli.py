@@ -201,6 +201,23 @@ def _prepare(case, tmp_path):
     if case == "bad-scene-value":
         (inputs / "s.toml").write_text('[mesh]\nprocedural = ["plane"]\n')
         return [inputs / "s.toml"], ["s.toml", "procedural"]
+    if case == "truncated-ply-header":
+        (inputs / "head.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nelement "
+                                          b"vertex 3\nproperty fl")
+        return [inputs / "head.ply"], ["head.ply", "not a readable mesh"]
+    if case == "garbage-obj":
+        (inputs / "junk.obj").write_bytes(bytes(range(256)) * 8)
+        return [inputs / "junk.obj"], ["junk.obj"]
+    if case == "huge-camera":
+        (inputs / "s.toml").write_text('[mesh]\nprocedural = "plane"\n[camera]\n'
+                                       'eye = [1e39, 0, -5]\nlook_at = [0, 0, 0]\n')
+        return [inputs / "s.toml"], ["s.toml", "camera eye", "float32"]
+    if case == "empty-spec-item":
+        return ["plane", "--sorter", "nah:threshold=0.5,,max_cells=2"], ["empty item"]
+    if case == "tile-too-big":
+        return ["plane", "--tile", "65"], ["tile"]
+    if case == "depth-too-big":
+        return ["plane", "--depth", "100000"], ["max_depth"]
     if case == "bad-camera":
         (inputs / "s.toml").write_text('[mesh]\nprocedural = "plane"\n'
                                        '[camera]\neye = [0, 0, 0]\nlook_at = [0, 0, 0]\n')
@@ -211,7 +228,9 @@ def _prepare(case, tmp_path):
 SCENE_AND_PLUGIN_ERRORS = ["missing-scene-file", "unknown-scene", "truncated-ply", "no-faces",
                            "nan-vertices", "unknown-sorter", "unknown-traversal",
                            "unread-parameter", "bad-spec", "bad-parameter-value",
-                           "bad-scene-key", "bad-scene-value", "bad-camera"]
+                           "bad-scene-key", "bad-scene-value", "bad-camera",
+                           "truncated-ply-header", "garbage-obj", "huge-camera",
+                           "empty-spec-item", "tile-too-big", "depth-too-big"]
 
 
 @pytest.mark.parametrize("case", SCENE_AND_PLUGIN_ERRORS)
@@ -282,18 +301,50 @@ def test_failed_render_leaves_existing_outputs_untouched(tmp_path, capsys):
     (["render", "--depth", "-1"], "--depth"),
     (["render", "--threads", "0"], "--threads"),
     (["render", "--shadow-rays", "maybe"], "--shadow-rays"),
+    (["render", "--exposure", "nan"], "--exposure"),
+    (["render", "--exposure", "inf"], "--exposure"),
+    (["render", "--exposure", "5000"], "--exposure"),
+    (["render", "--exposure", "bright"], "--exposure"),
+    (["render", "--seed", "4294967296"], "--seed"),
+    (["render", "--seed", str(10**23)], "--seed"),
+    (["render", "--seed", "-1"], "--seed"),
     (["frobnicate"], "frobnicate"),
     ([], "command"),
 ])
 def test_argument_errors_exit_2(argv, option, tmp_path, capsys, monkeypatch):
-    """Malformed options are argparse errors: exit status 2, usage on stderr, no file."""
+    """Malformed options: exit status 2 and one 'raysort: error:' line naming the option,
+    before anything is rendered or written."""
     monkeypatch.chdir(tmp_path)
     with pytest.raises(SystemExit) as info:
         main(argv)
     assert info.value.code == 2
-    err = capsys.readouterr().err
-    assert "usage:" in err and option in err and "Traceback" not in err
+    assert_one_line_error(capsys.readouterr().err, option, "--help")
     assert os.listdir(tmp_path) == []
+
+
+def test_plugin_booleans_as_the_readme_writes_them(tmp_path, capsys):
+    """true/false/none in a plugin spec are booleans and None, as in the README."""
+    code, _, err = run(capsys, "render", "plane", *TINY, "-o", tmp_path / "x.exr", "--shader",
+                       "lambert:russian_roulette=true,shadow_rays=none", "--generator",
+                       "pinhole:jitter=false")
+    assert code == 0, err
+
+
+@pytest.mark.parametrize("seed", ["0", "4294967295"])
+def test_seed_range_ends_are_accepted(seed, tmp_path, capsys):
+    code, _, err = run(capsys, "render", "plane", *TINY, "--seed", seed, "-o", tmp_path / "x.exr")
+    assert code == 0, err
+
+
+@pytest.mark.parametrize("json_name", ["x.exr", "x.png", "./sub/../x.exr"])
+def test_json_may_not_overwrite_the_image(json_name, tmp_path, capsys, monkeypatch):
+    """--json naming the EXR or its PNG preview is an error up front, nothing written."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "sub").mkdir()
+    code, out, err = run(capsys, "render", "plane", *TINY, "-o", "x.exr", "--json", json_name)
+    assert code == 2
+    assert_one_line_error(err, "--json", json_name)
+    assert out == "" and os.listdir(tmp_path) == ["sub"]
 
 
 # --------------------------------------------------------------------------

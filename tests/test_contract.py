@@ -3,13 +3,15 @@
 Every broken result must raise :class:`raysort.PluginContractError` naming
 the sorter (message, ``.name``, ``.kind``); valid results pass and come back
 as int32.  The pipeline checks every untrusted sorter even with
-``check_sorters=False``.
+``check_plugins=False``.
 """
+import re
+
 import numpy as np
 import pytest
 
 import raysort
-import raysort.pipeline
+from raysort import contract
 from raysort.contract import check_sort
 from raysort.errors import PluginContractError, RaysortError
 from raysort.rays import MAX_PACKET, RayBatch
@@ -192,12 +194,12 @@ def registered():
     assert not set(names) & set(raysort.available("sorters"))
 
 
-@pytest.mark.parametrize("check_sorters", [True, False])
-def test_pipeline_rejects_broken_sorter(registered, check_sorters):
-    """render() raises PluginContractError naming the sorter, even with check_sorters=False."""
+@pytest.mark.parametrize("check_plugins", [True, False])
+def test_pipeline_rejects_broken_sorter(registered, check_plugins):
+    """render() raises PluginContractError naming the sorter, even with check_plugins=False."""
     registered("broken_test", BrokenSorter)
     assert "broken_test" in raysort.available("sorters")
-    pipe = raysort.Pipeline("plane", sorter="broken_test", check_sorters=check_sorters)
+    pipe = raysort.Pipeline("plane", sorter="broken_test", check_plugins=check_plugins)
     with pytest.raises(PluginContractError, match="'broken_test'") as info:
         pipe.render(8, 8, 1)
     assert info.value.name == "broken_test" and info.value.kind == "sorters"
@@ -207,7 +209,7 @@ def test_pipeline_rejects_broken_sorter(registered, check_sorters):
 def test_trace_rejects_broken_sorter(registered):
     """Pipeline.trace on a plain batch runs the same check."""
     registered("broken_test", BrokenSorter)
-    pipe = raysort.Pipeline("plane", sorter="broken_test", check_sorters=False)
+    pipe = raysort.Pipeline("plane", sorter="broken_test", check_plugins=False)
     rays = RayBatch.from_arrays(np.tile([0.0, 1.0, 0.0], (5, 1)), np.tile([0, -1.0, 0], (5, 1)))
     with pytest.raises(PluginContractError, match="'broken_test'"):
         pipe.trace(rays)
@@ -215,46 +217,282 @@ def test_trace_rejects_broken_sorter(registered):
 
 def test_third_party_subclass_of_trusted_builtin_is_checked(registered):
     """A plugin that merely subclasses a trusted built-in is third-party: still checked with
-    check_sorters=False (the Pipeline docstring: "third-party sorters are always checked")."""
+    check_plugins=False (the Pipeline docstring: "third-party sorters are always checked")."""
     assert InheritedTrustSorter.trusted      # inherited from NoneSorter
     registered("inherits_trust_test", InheritedTrustSorter)
-    pipe = raysort.Pipeline("plane", sorter="inherits_trust_test", check_sorters=False)
+    pipe = raysort.Pipeline("plane", sorter="inherits_trust_test", check_plugins=False)
     with pytest.raises(PluginContractError, match="'inherits_trust_test'"):
         pipe.render(8, 8, 1)
 
 
+CHECKS = {"sorters": "check_sort", "traversals": "check_hits", "shaders": "check_bounce",
+          "generators": "check_generated"}
+
+
 @pytest.fixture
 def check_calls(monkeypatch):
-    """Record the sorter names the pipeline passes to check_sort."""
+    """Record (check, plugin name) for each plugin check the pipeline runs."""
     calls = []
+    for check in CHECKS.values():
+        real = getattr(contract, check)
 
-    def spy(name, result, n, packets):
-        calls.append(name)
-        return check_sort(name, result, n, packets)
+        def spy(plugin, *args, _real=real, _check=check):
+            calls.append((_check, plugin if isinstance(plugin, str) else plugin.name))
+            return _real(plugin, *args)
 
-    monkeypatch.setattr(raysort.pipeline, "check_sort", spy)
+        monkeypatch.setattr(contract, check, spy)
     return calls
 
 
-@pytest.mark.parametrize("sorter, check_sorters, checked", [
+@pytest.mark.parametrize("sorter, check_plugins, checked", [
     ("none", True, True), ("nah", True, True), ("nah_numpy", True, True),
     ("none", False, False), ("nah", False, False),     # trusted built-ins may skip
     ("nah_numpy", False, True),                         # built-in but untrusted
 ])
-def test_which_sorters_are_checked(check_calls, sorter, check_sorters, checked):
-    """check_sorters=False skips the check only for built-ins marked trusted."""
+def test_which_sorters_are_checked(check_calls, sorter, check_plugins, checked):
+    """check_plugins=False skips the check only for built-ins marked trusted."""
     assert raysort.load("sorters", sorter).trusted == (sorter in ("none", "nah"))
-    raysort.Pipeline("plane", sorter=sorter, check_sorters=check_sorters).render(8, 8, 1)
-    assert bool(check_calls) == checked
-    assert set(check_calls) <= {sorter}
+    raysort.Pipeline("plane", sorter=sorter, check_plugins=check_plugins).render(8, 8, 1)
+    sorts = [name for check, name in check_calls if check == "check_sort"]
+    assert bool(sorts) == checked
+    assert set(sorts) <= {sorter}
+
+
+@pytest.mark.parametrize("check_plugins", [True, False])
+def test_every_kind_is_checked_unless_trusted(check_calls, check_plugins):
+    """With check_plugins=True every plugin result is checked; with False none of the
+    trusted built-ins (pinhole, nah, wide, lambert) is."""
+    pipe = raysort.Pipeline("plane", check_plugins=check_plugins)
+    for kind in CHECKS:
+        plugin = getattr(pipe, kind[:-1])
+        assert vars(type(plugin)).get("trusted") is True, plugin
+    pipe.render(8, 8, 1)
+    expected = {(CHECKS[kind], getattr(pipe, kind[:-1]).name) for kind in CHECKS}
+    assert set(check_calls) == (expected if check_plugins else set())
 
 
 def test_untrusted_valid_sorter_is_checked_and_works(registered, check_calls):
-    """A correct third-party sorter is checked (check_sorters=False) and renders the same
+    """A correct third-party sorter is checked (check_plugins=False) and renders the same
     image as ``none``."""
     registered("counting_test", CountingSorter)
     image = raysort.Pipeline("plane", sorter="counting_test",
-                             check_sorters=False).render(8, 8, 1).image
-    assert check_calls and set(check_calls) == {"counting_test"}
+                             check_plugins=False).render(8, 8, 1).image
+    assert ("check_sort", "counting_test") in check_calls
+    assert {name for check, name in check_calls if check == "check_sort"} == {"counting_test"}
     ref = raysort.Pipeline("plane", sorter="none").render(8, 8, 1).image
     assert image.tobytes() == ref.tobytes()
+
+
+# -- caller arguments -----------------------------------------------------------------------
+
+@pytest.mark.parametrize("packets, n", [
+    ([0, 10], 10), ([0, 0, 4, 4, 10, 10], 10), (np.array([0, 3, 10], np.uint8), 10),
+    ([0], 0), ([0, 0], 0), (range(0, 11, 5), 10),
+])
+def test_valid_packets(packets, n):
+    out = contract.check_packets(packets, n)
+    assert out.dtype == np.int32 and out.tolist() == list(packets)
+
+
+@pytest.mark.parametrize("packets, n, match", [
+    ([], 1000, "start at 0 and end at 1000"),
+    ([0, 500], 1000, "end at 1000, the number of rays; got \\[0, 500\\]"),
+    ([0, 100000], 1024, "end at 1024"),
+    ([5, 1000], 1000, "start at 0"),
+    ([0, 600, 200, 1000], 1000, "must not decrease, got 600 then 200"),
+    ([0.0, 10.0], 10, "integer"),
+    ([[0, 10]], 10, "1-d"),
+    (["0", "10"], 10, "integer"),
+    ([0, 2**32 + 5, 10], 10, "must not decrease"),
+    ([True, False], 1, "integer"),
+    (None, 10, "integer"),
+], ids=["empty", "short", "past-the-end", "not-from-0", "decreasing", "floats", "2-d",
+        "strings", "int32-wrap", "bools", "None"])
+def test_bad_packets_name_the_argument(packets, n, match):
+    """A caller's bad packets: ConfigError naming 'packets' (not the sorter)."""
+    with pytest.raises(raysort.ConfigError, match=match) as info:
+        contract.check_packets(packets, n)
+    assert str(info.value).startswith("packets ")
+
+
+def test_too_many_rays_for_int32_packets():
+    with pytest.raises(raysort.ConfigError, match="int32"):
+        contract.check_packets([0, 2**31], 2**31)
+
+
+@pytest.mark.parametrize("rays", [None, np.zeros((8, 4), np.float32), [[0, 0, 0]], "rays"])
+def test_trace_needs_a_ray_batch(rays):
+    with pytest.raises(raysort.ConfigError, match="RayBatch.from_arrays"):
+        contract.check_ray_batch(rays)
+
+
+# -- traversal results ----------------------------------------------------------------------
+
+def plane_trace(traversal="single", any_hit=False, n=40):
+    """Gather n rays at the plane scene (every other one pointing away, a few invalid), run
+    ``traversal``; returns (packets, before, order, offsets, n_prim)."""
+    scene = raysort.load_scene("plane")
+    rng = np.random.default_rng(5)
+    down = np.where(np.arange(n)[:, None] % 2 == 0, [0, -1.0, 0], [0, 1.0, 0])
+    rays = RayBatch.from_arrays(rng.uniform(-3, 3, (n, 3)) + [0, 4, 0],
+                                down + rng.normal(0, 0.1, (n, 3)))
+    rays.tmin[::7] = np.inf                      # some invalid rays
+    order = rng.permutation(n).astype(np.int32)
+    offsets = np.array([0, 3, 17, 18, n], np.int32)   # padding after 3, 17 and 18 rays
+    packets = raysort.gather(rays, order, offsets)
+    before = contract.before_traversal(packets)
+    raysort.create("traversals", traversal).intersect(scene.bvh(), packets, any_hit)
+    return packets, before, order, offsets, len(scene.faces)
+
+
+def hits_error(packets, before, order, offsets, n_prim, any_hit=False):
+    with pytest.raises(PluginContractError) as info:
+        contract.check_hits("my_traversal", packets, before, order, offsets, n_prim, any_hit)
+    assert info.value.kind == "traversals" and info.value.name == "my_traversal"
+    return str(info.value)
+
+
+@pytest.mark.parametrize("any_hit", [False, True])
+def test_valid_hits_pass(any_hit):
+    args = plane_trace(any_hit=any_hit)
+    assert (args[0].prim >= 0).any() and (args[0].prim < 0).any()
+    contract.check_hits("my_traversal", *args, any_hit)
+
+
+def test_an_any_hit_query_may_mark_hits_like_embree():
+    """prim = 0 and t = -inf for every occluded ray (plugins/raysort-embree) is valid."""
+    packets, before, order, offsets, n_prim = plane_trace(any_hit=True)
+    hit = packets.prim >= 0
+    packets.prim[hit], packets.rows[10, hit] = 0, -np.inf
+    contract.check_hits("my_traversal", packets, before, order, offsets, n_prim, True)
+
+
+@pytest.mark.parametrize("corrupt, match", [
+    (lambda p, hit: p.prim.__setitem__(hit, 2), "prim = 2 is neither -1"),
+    (lambda p, hit: p.prim.__setitem__(hit, -2), "prim = -2"),
+    (lambda p, hit: p.rows[10].__setitem__(hit, np.nan), "outside the ray's interval"),
+    (lambda p, hit: p.rows[10].__setitem__(hit, -1.0), "outside the ray's interval"),
+    (lambda p, hit: p.rows[10].__setitem__(hit, np.inf), "outside the ray's interval"),
+    (lambda p, hit: p.v.__setitem__(hit, np.inf), "must be finite"),
+    (lambda p, hit: p.prim.__setitem__(3, 0), "padding lane 3"),
+    (lambda p, hit: p.index.__setitem__(3, 5), "padding lane 3"),
+    (lambda p, hit: p.index.__setitem__(hit[0], 10**6), "was changed to 1000000"),
+    (lambda p, hit: setattr(p, "u", p.u.copy()), "replaced packets.u"),
+    (lambda p, hit: setattr(p.prim, "shape", (2, -1)), "reshaped or retyped"),
+], ids=["prim-high", "prim-negative", "t-nan", "t-behind", "t-infinite", "v-inf",
+        "padding-prim", "padding-index", "index", "replaced", "reshaped"])
+def test_broken_hits(corrupt, match):
+    packets, before, order, offsets, n_prim = plane_trace()
+    hit = np.flatnonzero(packets.prim >= 0)
+    corrupt(packets, hit)
+    assert re.search(match, hits_error(packets, before, order, offsets, n_prim)), match
+
+
+def test_a_hit_on_an_invalid_ray_is_broken():
+    """An invalid ray (tmin = inf here) has an empty interval: no t can be a hit."""
+    packets, before, order, offsets, n_prim = plane_trace()
+    lane = np.flatnonzero((packets.index >= 0) & (packets.rows[9] == np.inf))[0]
+    packets.prim[lane], packets.rows[10, lane] = 0, 1.0
+    assert "outside the ray's interval (inf" in hits_error(packets, before, order, offsets,
+                                                           n_prim)
+
+
+@pytest.mark.parametrize("counters, match", [
+    (None, "must return raysort.stats.Counters"),
+    (raysort.Counters(box1=-1), "box1 must be a whole number >= 0, got -1"),
+    (raysort.Counters(tri4=1.5), "tri4"),
+    (raysort.Counters(rays=True), "rays"),
+    (raysort.Counters(available=1), "available"),
+])
+def test_broken_counters(counters, match):
+    with pytest.raises(PluginContractError, match=match):
+        contract.check_counters("my_traversal", counters)
+
+
+# -- generator and shader results -----------------------------------------------------------
+
+def test_generated_rays():
+    rays = RayBatch.from_arrays(np.zeros((6, 3)), np.tile([0, 0, 1.0], (6, 1)))
+    assert contract.check_generated("my_generator", rays, 6) is rays
+    rays.origins[1, 4] = np.nan
+    with pytest.raises(PluginContractError, match="ray 4 .* not finite, yet not marked"):
+        contract.check_generated("my_generator", rays, 6)
+    rays.tmin[4], rays.tmax[4] = 1.0, 1.0            # marked invalid: legal
+    contract.check_generated("my_generator", rays, 6)
+    rays.tmin[2] = -0.5
+    with pytest.raises(PluginContractError, match="ray 2 has tmin = -0.5"):
+        contract.check_generated("my_generator", rays, 6)
+    with pytest.raises(PluginContractError, match="must return 7 rays"):
+        contract.check_generated("my_generator", RayBatch(6), 7)
+
+
+def bounce(n_next=4, *, parent=None, shadow=None):
+    rays = RayBatch.from_arrays(np.zeros((n_next, 3)), np.tile([0, 0, 1.0], (n_next, 1)))
+    parent = np.arange(n_next, dtype=np.int32) if parent is None else parent
+    return raysort.Bounce(rays, parent, np.ones((3, n_next), np.float32), shadow)
+
+
+def shadow(k=3, *, slot=None, parent=None, contribution=None):
+    rays = RayBatch.from_arrays(np.zeros((k, 3)), np.tile([0, 1.0, 0], (k, 1)))
+    return raysort.ShadowRays(rays, np.arange(k) if parent is None else parent,
+                              np.zeros(k, int) if slot is None else slot,
+                              np.ones((3, k)) if contribution is None else contribution)
+
+
+def test_valid_bounce_comes_back_with_pipeline_types():
+    out = contract.check_bounce("my_shader", bounce(shadow=shadow(slot=[0, 7, 2])), 6, 8,
+                                np.zeros((8, 3)))
+    assert out.parent.dtype == np.int32 and out.throughput.dtype == np.float32
+    assert out.shadow.slot.dtype == np.int32 and out.shadow.contribution.dtype == np.float32
+
+
+@pytest.mark.parametrize("result, match", [
+    (None, "must return raysort.paths.Bounce"),
+    (bounce(parent=np.array([0, 2, 1, 3])), "Bounce.parent must ascend, got 2 then 1"),
+    (bounce(parent=np.array([0, 1, 2, 6])), r"Bounce.parent\[3\] = 6 is out of range 0..5"),
+    (bounce(parent=np.array([-1, 1, 2, 3])), "out of range"),
+    (bounce(parent=np.array([0, 1, 2])), "3 entries, expected 4"),
+    (bounce(parent=np.arange(4.0)), "integer"),
+    (bounce(shadow=shadow(slot=[0, 8, 1])), r"ShadowRays.slot\[1\] = 8 is out of range 0..7"),
+    (bounce(shadow=shadow(parent=[2, 1, 0])), "ShadowRays.parent must ascend"),
+    (bounce(shadow=shadow(contribution=np.ones((3, 2)))), "contribution must be a float array"),
+    (bounce(shadow=shadow(contribution=np.full((3, 3), np.nan))), "must be finite"),
+], ids=["None", "descending", "parent-high", "parent-negative", "parent-short",
+        "parent-float", "slot", "shadow-parent", "contribution-shape", "contribution-nan"])
+def test_broken_bounce(result, match):
+    with pytest.raises(PluginContractError, match=match) as info:
+        contract.check_bounce("my_shader", result, 6, 8, np.zeros((8, 3)))
+    assert info.value.kind == "shaders" and "'my_shader'" in str(info.value)
+
+
+def test_non_finite_radiance_is_the_shaders_fault():
+    radiance = np.zeros((8, 3))
+    radiance[5, 2] = np.inf
+    with pytest.raises(PluginContractError, match=r"radiance\[5, 2\] is inf"):
+        contract.check_bounce("my_shader", bounce(), 6, 8, radiance)
+
+
+# -- naming the plugin ----------------------------------------------------------------------
+
+def test_a_raising_plugin_is_named_with_its_distribution(registered):
+    """call_plugin turns any exception into a PluginContractError naming the plugin and
+    where it comes from; the original exception is its cause."""
+    class Exploding(raysort.Sorter):
+        def sort(self, rays, packets, bounds):
+            return 1 / 0
+
+    registered("exploding_test", Exploding)
+    pipe = raysort.Pipeline("plane", sorter="exploding_test")
+    with pytest.raises(PluginContractError) as info:
+        pipe.render(8, 8, 1)
+    assert str(info.value) == ("sorter 'exploding_test' (registered in process) failed: sort() "
+                               "raised ZeroDivisionError: division by zero")
+    assert isinstance(info.value.__cause__, ZeroDivisionError)
+    assert info.value.distribution == "<in-process>"
+
+
+def test_an_installed_plugin_is_named_with_its_distribution():
+    error = contract.plugin_error("sorters", raysort.create("sorters", "nah"), "test")
+    assert str(error) == (f"sorter 'nah' (from distribution 'raysort' {raysort.__version__}) "
+                          f"broke its contract: test")
+    assert error.distribution == "raysort"

@@ -183,18 +183,60 @@ def test_memory_is_bounded_by_the_batch(sibenik):
 # bad settings and broken plugins
 # --------------------------------------------------------------------------
 
-@pytest.mark.parametrize("kw", [dict(tile=0), dict(tile=65), dict(threads=0),
-                                dict(batch_rays=0), dict(bvh={"max_leaf": 0})])
-def test_bad_pipeline_settings(kw):
-    with pytest.raises(ConfigError):
-        raysort.Pipeline("plane", **kw).render(4, 4, 1)
+@pytest.mark.parametrize("kw, name", [
+    (dict(tile=0), "tile"), (dict(tile=65), "tile"), (dict(threads=0), "threads"),
+    (dict(batch_rays=0), "batch_rays"), (dict(bvh={"max_leaf": 0}), "max_leaf"),
+    (dict(bvh=5), "bvh"), (dict(bvh={"leaf": 2}), "'leaf'"), (dict(scene=42), "scene"),
+    (dict(scene=b"plane"), "scene"), (dict(check_plugins="yes"), "check_plugins"),
+    (dict(threads=2.0), "threads"), (dict(sorter=5), "sorter"),
+])
+def test_bad_pipeline_settings(kw, name):
+    """A ConfigError naming the argument, never a raw TypeError or ValueError."""
+    kw = {"scene": "plane"} | kw
+    with pytest.raises(ConfigError, match=name):
+        raysort.Pipeline(kw.pop("scene"), **kw).render(4, 4, 1)
 
 
-@pytest.mark.parametrize("kw", [dict(width=0), dict(spp=0), dict(seed=-1), dict(height=2.5)])
-def test_bad_render_settings(kw):
+@pytest.mark.parametrize("kw, name", [
+    (dict(width=0), "width"), (dict(spp=0), "spp"), (dict(seed=-1), "seed"),
+    (dict(seed=2**32), "seed"), (dict(height=2.5), "height"), (dict(progress=5), "progress"),
+    (dict(width=100000, height=100000), "pixels"),
+])
+def test_bad_render_settings(kw, name):
     args = dict(width=4, height=4, spp=1, seed=0) | kw
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError, match=name):
         raysort.Pipeline("plane").render(**args)
+
+
+def test_an_image_too_big_for_memory_is_refused_up_front(monkeypatch):
+    """render() compares the image buffer with the machine's memory before allocating."""
+    monkeypatch.setattr("os.sysconf", lambda name: {"SC_PHYS_PAGES": 1000,
+                                                   "SC_PAGE_SIZE": 4096}[name])
+    with pytest.raises(ConfigError, match=r"1024x1024 needs 0.0117 GiB .* more than this "
+                                          r"machine's 0.00381 GiB"):
+        raysort.Pipeline("plane").render(1024, 1024, 1)
+
+
+@pytest.mark.parametrize("kw, name", [
+    (dict(threads=0), "threads"), (dict(threads=True), "threads"), (dict(any_hit=1), "any_hit"),
+    (dict(packets=[0, 3]), "packets"), (dict(timings=[]), "timings"),
+])
+def test_bad_trace_arguments(kw, name):
+    rays = raysort.RayBatch.from_arrays(np.zeros((4, 3)), np.tile([0, -1.0, 0], (4, 1)))
+    with pytest.raises(ConfigError, match=name):
+        raysort.Pipeline("plane").trace(rays, **kw)
+
+
+@pytest.mark.parametrize("check_plugins", [True, False])
+def test_bad_packets_are_the_callers_fault_not_the_sorters(check_plugins):
+    """trace(packets=...) that would crash or silently drop rays: a ConfigError naming
+    'packets', even with the checks of trusted plugins off."""
+    rays = raysort.RayBatch.from_arrays(np.tile([0, 1.0, 0], (1000, 1)),
+                                        np.tile([0, -1.0, 0], (1000, 1)))
+    pipe = raysort.Pipeline("plane", check_plugins=check_plugins)
+    for packets in ([0, 100000], [], [0, 500], [0, 600, 200, 1000]):
+        with pytest.raises(ConfigError, match="^packets"):
+            pipe.trace(rays, packets)
 
 
 def _with_plugin(kind, name, cls, **pipe_kw):

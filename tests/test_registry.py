@@ -493,7 +493,10 @@ def test_create_rejects_an_instance_of_another_kind(fresh):
     ("pinhole:jitter=False", {"type": "pinhole", "jitter": False}),
     ("x:mode=fast", {"type": "x", "mode": "fast"}),
     ("x:mode='fast'", {"type": "x", "mode": "fast"}),
-    ("x:a=1,,b=2,", {"type": "x", "a": 1, "b": 2}),
+    ("x:a=1, b = 2 ", {"type": "x", "a": 1, "b": 2}),
+    ("lambert:russian_roulette=true,shadow_rays=none",
+     {"type": "lambert", "russian_roulette": True, "shadow_rays": None}),
+    ("x:a=FALSE,b=True,c=Null", {"type": "x", "a": False, "b": True, "c": None}),
     ("x:a=-3e-2", {"type": "x", "a": -0.03}),
     ("x:a=", {"type": "x", "a": ""}),
 ])
@@ -505,9 +508,22 @@ def test_parse_spec(spec, expected):
 
 
 @pytest.mark.parametrize("spec", ["nah:threshold", "nah:=1", "nah:1x=2", "nah:a b=1",
-                                  "nah:threshold=0.5,max_cells"])
+                                  "nah:threshold=0.5,max_cells", "nah:threshold=0.5,,max_cells=2",
+                                  "nah:threshold=0.5,", "nah:,threshold=0.5"])
 def test_parse_spec_rejects_bad_items(spec):
-    """An item that is not identifier=value is a ConfigError quoting the item and the spec."""
+    """An item that is not identifier=value (an empty one too) is a ConfigError quoting
+    the item and the spec."""
     with pytest.raises(ConfigError, match="expected key=value") as info:
         parse_spec(spec)
     assert repr(spec) in str(info.value)
+
+
+@pytest.mark.parametrize("spec, match", [
+    ("nah:max_cells=2,max_cells=4", "'max_cells' is given twice"),
+    (":threshold=0.5", "expected a plugin name"),
+    ("", "expected a plugin name"),
+    (None, "is a string"),
+])
+def test_parse_spec_rejects_repeats_and_missing_names(spec, match):
+    with pytest.raises(ConfigError, match=match):
+        parse_spec(spec)

@@ -61,6 +61,8 @@ class PinholeGenerator(Generator):
     ==========  ======  =======  ==========================================
     """
 
+    trusted = True
+
     def __init__(self, *, jitter=True):
         self.jitter = boolean("jitter", jitter)
 

@@ -13,10 +13,14 @@ imports from here (and, in Cython, cimports the C layouts of
   (:data:`MAX_PACKET`);
 * **parameter validators** (:func:`integer`, :func:`number`, :func:`boolean`,
   :func:`vector3`), which raise :class:`ConfigError` naming the parameter;
-* **contract checks** (:func:`check_sort`), the same ones the pipeline runs on
-  every plugin from outside raysort.
+* **contract checks** (:func:`check_sort`, :func:`check_hits` with
+  :func:`before_traversal`, :func:`check_counters`, :func:`check_generated`,
+  :func:`check_bounce`, and :func:`check_packets` for large-packet
+  boundaries), the same ones the pipeline runs on every plugin from outside
+  raysort, for a plugin's own tests.
 """
-from raysort.contract import check_sort
+from raysort.contract import (before_traversal, check_bounce, check_counters, check_generated,
+                              check_hits, check_packets, check_sort)
 from raysort.errors import ConfigError, PluginContractError
 from raysort.params import boolean, integer, number, vector3
 from raysort.paths import Bounce, Paths, ShadowRays
@@ -38,5 +42,6 @@ __all__ = [
     "RayBatch", "Packets", "Hits", "Paths", "Bounce", "ShadowRays", "Counters",
     "MAX_PACKET", "fixed_packets",
     "integer", "number", "boolean", "vector3",
-    "check_sort", "ConfigError", "PluginContractError", "get_include",
+    "check_sort", "check_hits", "before_traversal", "check_counters", "check_generated",
+    "check_bounce", "check_packets", "ConfigError", "PluginContractError", "get_include",
 ]

@@ -95,7 +95,7 @@ class AOShader(Shader):
     def __init__(self, *, samples=8, distance=None, background=1.0):
         self.samples = integer("samples", samples, 1, MAX_SAMPLES)
         self.distance = None if distance is None else number("distance", distance, 0,
-                                                             lo_open=True)
+                                                             lo_open=True, allow_inf=True)
         self.background = number("background", background, 0)
         self._prepared = None
 

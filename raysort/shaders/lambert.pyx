@@ -138,6 +138,8 @@ class LambertShader(Shader):
     ================  ======  =======  ======================================
     """
 
+    trusted = True
+
     def __init__(self, *, max_depth=2, shadow_rays=None, russian_roulette=False, rr_depth=1):
         self.max_depth = integer("max_depth", max_depth, 0, 64)
         self.shadow_rays = boolean("shadow_rays", shadow_rays, allow_none=True)

@@ -65,5 +65,7 @@ class MaskedTraversal(Traversal):
     It takes no parameters.
     """
 
+    trusted = True
+
     def intersect(self, bvh, packets, any_hit=False):
         return run(trace_masked, bvh, packets, any_hit)

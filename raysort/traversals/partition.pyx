@@ -80,5 +80,7 @@ class PartitionTraversal(Traversal):
     It takes no parameters.
     """
 
+    trusted = True
+
     def intersect(self, bvh, packets, any_hit=False):
         return run(trace_partition, bvh, packets, any_hit)

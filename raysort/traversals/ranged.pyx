@@ -130,5 +130,7 @@ class RangedTraversal(Traversal):
     It takes no parameters.
     """
 
+    trusted = True
+
     def intersect(self, bvh, packets, any_hit=False):
         return run(trace_ranged, bvh, packets, any_hit)

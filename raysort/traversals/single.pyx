@@ -55,5 +55,7 @@ class SingleTraversal(Traversal):
     It takes no parameters.
     """
 
+    trusted = True
+
     def intersect(self, bvh, packets, any_hit=False):
         return run(trace_single, bvh, packets, any_hit)

@@ -93,5 +93,7 @@ class WideTraversal(Traversal):
     It takes no parameters.
     """
 
+    trusted = True
+
     def intersect(self, bvh, packets, any_hit=False):
         return run(trace_wide, bvh, packets, any_hit, True)

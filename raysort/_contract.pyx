@@ -1,0 +1,466 @@
+"""One-pass contract checks (nogil), called by :mod:`raysort.contract`.
+
+Each function reads its arrays once and returns ``(code, where)``: ``code`` is
+0 when the contract holds, otherwise a :class:`Bad` value, and ``where`` the
+first offending position; :mod:`raysort.contract` turns that into a message.
+
+The loops are written for valid input, which is every frame: a block of
+elements (a sub-packet, or ``CHUNK`` values) is tested without branches
+(``bad |= ...`` over plain pointers, which the compiler vectorises) and only a
+block found bad is scanned again for its first offending element.  A float
+``x`` is finite exactly when ``x - x == 0``.  The functions take int32 or
+int64 index arrays (the caller converts other integer types).
+"""
+from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
+from libc.stdlib cimport calloc, free
+from libc.string cimport memset
+
+import numpy as np
+
+ctypedef fused index_t:
+    int32_t
+    int64_t
+
+ctypedef fused real_t:
+    float
+    double
+
+cdef enum:
+    CHUNK = 256         # values tested before one branch on the result
+
+
+cpdef enum Bad:
+    # what is wrong (0: nothing), and what ``where`` is
+    BAD_OFFSETS_START = 1   # offsets[0] != 0
+    BAD_OFFSETS_END         # offsets[-1] != n
+    BAD_OFFSETS_ORDER       # offsets[k + 1] <= offsets[k]              (sub-packet k)
+    BAD_OFFSETS_RANGE       # offsets[k + 1] > n                        (sub-packet k)
+    BAD_PACKET_SIZE         # sub-packet larger than the maximum        (sub-packet k)
+    BAD_INDEX_RANGE         # a[i] outside [lo, hi)                     (position i)
+    BAD_INDEX_REPEAT        # order[i] seen before                      (position i)
+    BAD_MIXED               # sub-packet spans large packets            (sub-packet k)
+    BAD_LANE_INDEX          # a lane's ray index was changed            (lane)
+    BAD_PADDING             # a padding lane was written                (lane)
+    BAD_PRIM                # prim neither -1 nor a triangle index      (lane)
+    BAD_T                   # hit t outside (tmin, tmax)                (lane)
+    BAD_UV                  # hit u or v not finite                     (lane)
+    BAD_TMIN                # an active ray with tmin < 0               (ray)
+    BAD_RAY                 # an active ray with a non-finite origin or direction (ray)
+    BAD_NOT_FINITE          # a non-finite value                        (position)
+    BAD_DESCENDING          # a[i] < a[i - 1]                           (position i)
+    BAD_PARENT_RANGE        # parent[i] outside [0, n)                  (path i)
+    BAD_PARENT_ORDER        # parent[i] < parent[i - 1]                 (path i)
+    BAD_WEIGHT              # a throughput or contribution not finite   (path i)
+    BAD_SLOT                # slot[i] outside [0, slots)                (path i)
+
+
+cdef inline Py_ssize_t block_end(Py_ssize_t start, Py_ssize_t n) noexcept nogil:
+    return start + CHUNK if start + CHUNK < n else n
+
+
+# ---------------------------------------------------------------------------
+# a sorter's order and offsets
+# ---------------------------------------------------------------------------
+
+cdef Py_ssize_t large_packet(const int32_t *packets, Py_ssize_t n_big, int64_t j) noexcept nogil:
+    """The last p < n_big with packets[p] <= j (packets ascend from 0)."""
+    cdef Py_ssize_t lo = 0, hi = n_big, mid
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if packets[mid] <= j:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+cdef int sort_kernel(const index_t *order, const index_t *offsets, Py_ssize_t n_sub,
+                     const int32_t *packets, Py_ssize_t n_big, int64_t n, int64_t max_packet,
+                     uint8_t *seen, Py_ssize_t *where) noexcept nogil:
+    cdef Py_ssize_t k, i, k_big = 0
+    cdef int64_t a, b
+    cdef index_t j, lo, hi
+    cdef int bad, inside
+    if offsets[0] != 0:
+        return BAD_OFFSETS_START
+    if offsets[n_sub] != n:
+        return BAD_OFFSETS_END
+    for k in range(n_sub):
+        where[0] = k
+        a, b = offsets[k], offsets[k + 1]
+        if b <= a:
+            return BAD_OFFSETS_ORDER
+        if b > n:
+            return BAD_OFFSETS_RANGE
+        if b - a > max_packet:
+            return BAD_PACKET_SIZE
+        if order[a] < 0 or order[a] >= n:
+            where[0] = a
+            return BAD_INDEX_RANGE
+        if not (packets[k_big] <= order[a] < packets[k_big + 1]):   # usually the same one
+            k_big = large_packet(packets, n_big, order[a])
+        lo, hi = packets[k_big], packets[k_big + 1]        # 0 <= lo <= order[a] < hi <= n
+        bad = 0
+        for i in range(a, b):       # in this large packet, and seen once (n: a spare slot)
+            j = order[i]
+            inside = (j >= lo) & (j < hi)
+            j = j if inside else <index_t> n
+            bad |= (not inside) | seen[j]
+            seen[j] = 1
+        if bad:
+            return sort_fault(order, a, b, lo, hi, n, seen, k, where)
+    return 0
+
+
+cdef int sort_fault(const index_t *order, int64_t a, int64_t b, int64_t lo, int64_t hi,
+                    int64_t n, uint8_t *seen, Py_ssize_t k, Py_ssize_t *where) noexcept nogil:
+    """What is wrong in sub-packet k, known bad, and where.  Sub-packets before it are
+    valid, so every ray of order[:b] is in range when the range test passed here."""
+    cdef int64_t i
+    for i in range(a, b):
+        if order[i] < lo or order[i] >= hi:
+            where[0] = i
+            if order[i] < 0 or order[i] >= n:
+                return BAD_INDEX_RANGE
+            where[0] = k
+            return BAD_MIXED
+    memset(seen, 0, n)
+    for i in range(b):
+        if seen[order[i]]:
+            where[0] = i
+            return BAD_INDEX_REPEAT
+        seen[order[i]] = 1
+    return BAD_INDEX_REPEAT     # not reached
+
+
+def sort_result(order, offsets, const int32_t[::1] packets, int64_t n, int64_t max_packet):
+    """A sorter's ``order``/``offsets`` (contiguous, both int32 or both int64) for ``n``
+    rays in the (valid) large packets ``packets``: a permutation of ``range(n)`` cut into
+    sub-packets of 1..max_packet rays, each inside one large packet.  The caller checks
+    ``len(order) == n`` and ``len(offsets) >= 1``."""
+    cdef Py_ssize_t where = 0
+    cdef int code
+    cdef const int32_t[::1] order32, offsets32
+    cdef const int64_t[::1] order64, offsets64
+    cdef uint8_t *seen = <uint8_t *> calloc(n + 1, 1)
+    if seen == NULL:
+        raise MemoryError()
+    try:
+        if order.dtype == np.int32:
+            order32, offsets32 = order, offsets
+            with nogil:
+                code = sort_kernel(&order32[0] if n else NULL, &offsets32[0],
+                                   offsets32.shape[0] - 1, &packets[0], packets.shape[0] - 1,
+                                   n, max_packet, seen, &where)
+        else:
+            order64, offsets64 = order, offsets
+            with nogil:
+                code = sort_kernel(&order64[0] if n else NULL, &offsets64[0],
+                                   offsets64.shape[0] - 1, &packets[0], packets.shape[0] - 1,
+                                   n, max_packet, seen, &where)
+    finally:
+        free(seen)
+    return code, where
+
+
+# ---------------------------------------------------------------------------
+# a traversal's hits
+# ---------------------------------------------------------------------------
+
+cdef inline int closest_bad(int32_t p, float tmin, float t, float t0, float u, float v,
+                            uint32_t n_prim) noexcept nogil:
+    """prim is -1 or below n_prim; a hit lies in (tmin, t0) with finite u, v."""
+    return ((<uint32_t> (p + 1) > n_prim)
+            | ((p >= 0) & ((not (tmin < t)) | (not (t < t0)) | ((u - u) + (v - v) != 0))))
+
+
+cdef int lanes_kernel(const int32_t *prim, const float *tmin, const float *t, const float *t0,
+                      const float *u, const float *v, Py_ssize_t capacity, uint32_t n_prim,
+                      bint any_hit, Py_ssize_t *where) noexcept nogil:
+    cdef Py_ssize_t a = 0, b, lane
+    cdef int bad
+    while a < capacity:
+        b = block_end(a, capacity)
+        bad = 0
+        if any_hit:             # a hit is any valid prim; t is the traversal's business
+            for lane in range(a, b):
+                bad |= <uint32_t> (prim[lane] + 1) > n_prim
+        else:
+            for lane in range(a, b):
+                bad |= closest_bad(prim[lane], tmin[lane], t[lane], t0[lane], u[lane],
+                                   v[lane], n_prim)
+        if bad:
+            for lane in range(a, b):
+                where[0] = lane
+                if <uint32_t> (prim[lane] + 1) > n_prim:
+                    return BAD_PRIM
+                if any_hit or not closest_bad(prim[lane], tmin[lane], t[lane], t0[lane],
+                                              u[lane], v[lane], n_prim):
+                    continue
+                return BAD_UV if tmin[lane] < t[lane] < t0[lane] else BAD_T
+        a = b
+    return 0
+
+
+cdef int index_lanes_kernel(const int32_t *prim, const int32_t *index, const int32_t *starts,
+                            const int32_t *counts, Py_ssize_t n_sub, const int32_t *order,
+                            const int32_t *offsets, Py_ssize_t capacity,
+                            Py_ssize_t *where) noexcept nogil:
+    """Each lane of sub-packet k holds ``order[offsets[k] + j]``; other lanes hold no ray
+    (index and prim -1)."""
+    cdef Py_ssize_t k, j, s, c, end = 0, lane
+    cdef const int32_t *lanes
+    cdef const int32_t *rays
+    cdef int bad
+    for k in range(n_sub + 1):
+        s = starts[k] if k < n_sub else capacity
+        c = counts[k] if k < n_sub else 0
+        bad = 0
+        for lane in range(end, s):
+            bad |= (index[lane] != -1) | (prim[lane] != -1)
+        if bad:
+            for lane in range(end, s):
+                if index[lane] != -1 or prim[lane] != -1:
+                    where[0] = lane
+                    return BAD_PADDING
+        lanes = index + s
+        rays = order + (offsets[k] if k < n_sub else 0)
+        for j in range(c):
+            bad |= lanes[j] != rays[j]
+        if bad:
+            for j in range(c):
+                if lanes[j] != rays[j]:
+                    where[0] = s + j
+                    return BAD_LANE_INDEX
+        end = s + c
+    return 0
+
+
+def hits(const float[:, ::1] rows, const float[::1] t0, const int32_t[::1] prim,
+         const float[::1] u, const float[::1] v, const int32_t[::1] index,
+         const int32_t[::1] starts, const int32_t[::1] counts, const int32_t[::1] order,
+         const int32_t[::1] offsets, int64_t n_prim, bint any_hit, int tmin_row, int t_row):
+    """A traversal's hits in gathered packets, ``t0`` being the row ``t`` before it ran
+    (the ray's tmax; -inf on an invalid ray).  Every lane still holds the ray the gather
+    put there (``order[offsets[k]:offsets[k + 1]]`` in sub-packet k; other lanes index and
+    prim -1), prim is -1 or a triangle index below ``n_prim``, and a closest hit has
+    ``tmin < t < t0`` and finite u, v.  An any-hit query marks a hit by any valid prim."""
+    cdef Py_ssize_t where = 0, capacity = prim.shape[0]
+    cdef int code
+    with nogil:
+        code = index_lanes_kernel(&prim[0], &index[0], &starts[0] if starts.shape[0] else NULL,
+                                  &counts[0] if counts.shape[0] else NULL, starts.shape[0],
+                                  &order[0] if order.shape[0] else NULL, &offsets[0], capacity,
+                                  &where)
+        if not code:
+            code = lanes_kernel(&prim[0], &rows[tmin_row, 0], &rows[t_row, 0], &t0[0], &u[0],
+                                &v[0], capacity, <uint32_t> n_prim, any_hit, &where)
+    return code, where
+
+
+# ---------------------------------------------------------------------------
+# rays made by a plugin
+# ---------------------------------------------------------------------------
+
+cdef inline int ray_bad(float ox, float oy, float oz, float dx, float dy, float dz, float tmin,
+                        float tmax) noexcept nogil:
+    """An active ray (tmin < tmax) needs tmin >= 0 and a finite origin and direction."""
+    cdef float acc = (ox - ox) + (oy - oy) + (oz - oz) + (dx - dx) + (dy - dy) + (dz - dz)
+    return (tmin < tmax) & ((not (tmin >= 0)) | (acc != 0))
+
+
+cdef int rays_kernel(const float *ox, const float *oy, const float *oz, const float *dx,
+                     const float *dy, const float *dz, const float *tmin, const float *tmax,
+                     Py_ssize_t n, Py_ssize_t *where) noexcept nogil:
+    cdef Py_ssize_t a = 0, b, i
+    cdef int bad
+    while a < n:
+        b = block_end(a, n)
+        bad = 0
+        for i in range(a, b):
+            bad |= ray_bad(ox[i], oy[i], oz[i], dx[i], dy[i], dz[i], tmin[i], tmax[i])
+        if bad:
+            for i in range(a, b):
+                if ray_bad(ox[i], oy[i], oz[i], dx[i], dy[i], dz[i], tmin[i], tmax[i]):
+                    where[0] = i
+                    return BAD_RAY if tmin[i] >= 0 else BAD_TMIN
+        a = b
+    return 0
+
+
+def rays(const float[:, ::1] data, Py_ssize_t n, int origin_row, int direction_row,
+         int tmin_row, int tmax_row):
+    """Rays ``[0, n)`` of a batch: each one is either active (``tmin < tmax``) with
+    ``tmin >= 0`` and a finite origin and direction (three rows each, from ``origin_row``
+    and ``direction_row``), or marked invalid (``not tmin < tmax``), which the gather
+    stores inactive."""
+    cdef Py_ssize_t where = 0
+    cdef int code
+    cdef int o = origin_row, d = direction_row
+    with nogil:
+        code = rays_kernel(&data[o, 0], &data[o + 1, 0], &data[o + 2, 0], &data[d, 0],
+                           &data[d + 1, 0], &data[d + 2, 0], &data[tmin_row, 0],
+                           &data[tmax_row, 0], n, &where)
+    return code, where
+
+
+# ---------------------------------------------------------------------------
+# index and value arrays
+# ---------------------------------------------------------------------------
+
+cdef int index_kernel(const index_t *x, Py_ssize_t n, index_t lo, index_t hi, bint ascending,
+                      Py_ssize_t *where) noexcept nogil:
+    cdef Py_ssize_t a = 0, b, i
+    cdef int bad
+    while a < n:
+        b = block_end(a, n)
+        bad = 0
+        for i in range(a, b):
+            bad |= (x[i] < lo) | (x[i] >= hi)
+        if ascending:
+            for i in range(a if a else 1, b):
+                bad |= x[i] < x[i - 1]
+        if bad:
+            for i in range(a, b):
+                where[0] = i
+                if x[i] < lo or x[i] >= hi:
+                    return BAD_INDEX_RANGE
+                if ascending and i and x[i] < x[i - 1]:
+                    return BAD_DESCENDING
+        a = b
+    return 0
+
+
+def index_array(x, int64_t lo, int64_t hi, bint ascending):
+    """Every ``x[i]`` in ``[lo, hi)`` and, with ``ascending``, ``x[i - 1] <= x[i]``
+    (``x``: a contiguous int32 or int64 array; for int32, ``lo`` and ``hi`` must fit)."""
+    cdef Py_ssize_t where = 0
+    cdef int code
+    cdef const int32_t[::1] x32
+    cdef const int64_t[::1] x64
+    if x.dtype == np.int32:
+        x32 = x
+        with nogil:
+            code = index_kernel(&x32[0] if x32.shape[0] else NULL, x32.shape[0], <int32_t> lo,
+                                <int32_t> hi, ascending, &where)
+    else:
+        x64 = x
+        with nogil:
+            code = index_kernel(&x64[0] if x64.shape[0] else NULL, x64.shape[0], lo, hi,
+                                ascending, &where)
+    return code, where
+
+
+cdef int finite_kernel(const real_t *x, Py_ssize_t n, Py_ssize_t *where) noexcept nogil:
+    cdef Py_ssize_t a = 0, b, i
+    cdef int bad
+    while a < n:
+        b = block_end(a, n)
+        bad = 0
+        for i in range(a, b):
+            bad |= (x[i] - x[i]) != 0
+        if bad:
+            for i in range(a, b):
+                if (x[i] - x[i]) != 0:
+                    where[0] = i
+                    return BAD_NOT_FINITE
+        a = b
+    return 0
+
+
+def finite(x):
+    """Every value of ``x`` (a contiguous 1-d float32 or float64 array) finite."""
+    cdef Py_ssize_t where = 0
+    cdef int code
+    cdef const float[::1] x32
+    cdef const double[::1] x64
+    if x.dtype == np.float32:
+        x32 = x
+        with nogil:
+            code = finite_kernel(&x32[0] if x32.shape[0] else NULL, x32.shape[0], &where)
+    else:
+        x64 = x
+        with nogil:
+            code = finite_kernel(&x64[0] if x64.shape[0] else NULL, x64.shape[0], &where)
+    return code, where
+
+
+# ---------------------------------------------------------------------------
+# a shader's next paths and shadow rays, in one pass
+# ---------------------------------------------------------------------------
+
+cdef inline int path_bad(const float *const *r, const int32_t *parent, const float *const *w,
+                         const int32_t *slot, Py_ssize_t i, uint32_t n, uint32_t slots,
+                         int tmin, int tmax) noexcept nogil:
+    cdef int bad = ray_bad(r[0][i], r[1][i], r[2][i], r[3][i], r[4][i], r[5][i], r[tmin][i],
+                           r[tmax][i])
+    bad |= <uint32_t> parent[i] >= n
+    bad |= (w[0][i] - w[0][i]) + (w[1][i] - w[1][i]) + (w[2][i] - w[2][i]) != 0
+    if slot != NULL:
+        bad |= <uint32_t> slot[i] >= slots
+    return bad
+
+
+cdef int paths_kernel(const float *const *r, const int32_t *parent, const float *const *w,
+                      const int32_t *slot, Py_ssize_t m, uint32_t n, uint32_t slots, int tmin,
+                      int tmax, Py_ssize_t *where) noexcept nogil:
+    cdef Py_ssize_t a = 0, b, i
+    cdef int bad
+    while a < m:
+        b = block_end(a, m)
+        bad = 0
+        if slot == NULL:
+            for i in range(a, b):
+                bad |= path_bad(r, parent, w, NULL, i, n, slots, tmin, tmax)
+        else:
+            for i in range(a, b):
+                bad |= path_bad(r, parent, w, slot, i, n, slots, tmin, tmax)
+        for i in range(a if a else 1, b):
+            bad |= parent[i] < parent[i - 1]
+        if bad:
+            for i in range(a, b):
+                where[0] = i
+                if ray_bad(r[0][i], r[1][i], r[2][i], r[3][i], r[4][i], r[5][i], r[tmin][i],
+                           r[tmax][i]):
+                    return BAD_RAY if r[tmin][i] >= 0 else BAD_TMIN
+                if <uint32_t> parent[i] >= n:
+                    return BAD_PARENT_RANGE
+                if i and parent[i] < parent[i - 1]:
+                    return BAD_PARENT_ORDER
+                if path_bad(r, parent, w, NULL, i, n, slots, tmin, tmax):
+                    return BAD_WEIGHT
+                if slot != NULL and <uint32_t> slot[i] >= slots:
+                    return BAD_SLOT
+        a = b
+    return 0
+
+
+def paths(const float[:, ::1] data, Py_ssize_t m, const int32_t[::1] parent,
+          const float[:, :] weight, slot, int64_t n, int64_t slots, int origin_row,
+          int direction_row, int tmin_row, int tmax_row):
+    """``m`` rays that continue paths (a shader's next bounce, or its shadow rays) in one
+    pass: each ray finite or marked invalid (see :func:`rays`); ``parent`` ascending in
+    ``[0, n)``; ``weight`` (3, m; rows contiguous) finite; ``slot`` (None, or int32)
+    in ``[0, slots)``."""
+    cdef Py_ssize_t where = 0
+    cdef int code, c
+    cdef const float *r[8]
+    cdef const float *w[3]
+    cdef const int32_t[::1] slot32
+    cdef const int32_t *slot_ptr = NULL
+    if m == 0:
+        return 0, 0
+    if weight.shape[0] != 3 or weight.shape[1] < m or weight.strides[1] != sizeof(float):
+        raise ValueError("weight must be (3, m) with contiguous rows")
+    for c in range(3):
+        r[c] = &data[origin_row + c, 0]
+        r[3 + c] = &data[direction_row + c, 0]
+        w[c] = &weight[c, 0]
+    r[6], r[7] = &data[tmin_row, 0], &data[tmax_row, 0]
+    if slot is not None:
+        slot32 = slot
+        slot_ptr = &slot32[0]
+    with nogil:
+        code = paths_kernel(r, &parent[0], w, slot_ptr, m, <uint32_t> n, <uint32_t> slots,
+                            6, 7, &where)      # r[6], r[7]: tmin, tmax
+    return code, where
