@@ -31,8 +31,9 @@ _require_compiled()
 
 from raysort.bvh import BVH  # noqa: E402 (after the check above)
 from raysort.camera import Camera
-from raysort.errors import (ConfigError, OutputError, PluginContractError, PluginError,
-                            PluginLoadError, RaysortError, SceneError, UnknownPluginError)
+from raysort.errors import (ClusterError, ConfigError, OutputError, PluginContractError,
+                            PluginError, PluginLoadError, RaysortError, SceneError,
+                            UnknownPluginError)
 from raysort.meshtrace import trace
 from raysort.paths import Bounce, Paths, ShadowRays
 from raysort.pipeline import Pipeline, RenderResult, RenderStats
@@ -48,7 +49,7 @@ __all__ = [
     "ShadowRays", "Counters", "Generator", "Sorter", "Traversal", "Shader", "register",
     "unregister", "create", "load", "available", "list_plugins", "refresh", "get_include",
     "RaysortError", "ConfigError", "SceneError", "OutputError", "PluginError",
-    "UnknownPluginError", "PluginLoadError", "PluginContractError",
+    "UnknownPluginError", "PluginLoadError", "PluginContractError", "ClusterError",
     "trace",
 ]
 

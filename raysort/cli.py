@@ -7,6 +7,7 @@ traceback; output files are written whole or not at all.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 
@@ -150,12 +151,13 @@ def cmd_render(args):
                     traversal=args.traversal, shader=_shader_config(args), tile=args.tile,
                     threads=args.threads)
     width, height = args.size
-    progress = Progress(f"render {pipe.scene.name}", unit="tile", enabled=not args.quiet)
-    try:
-        result = pipe.render(width, height, args.spp, args.seed, progress=progress,
-                             aov=args.aov)
-    finally:
-        progress.close()
+    with dask_client(args.scheduler) as client:
+        progress = Progress(f"render {pipe.scene.name}", unit="tile", enabled=not args.quiet)
+        try:
+            result = pipe.render(width, height, args.spp, args.seed, progress=progress,
+                                 aov=args.aov, client=client)
+        finally:
+            progress.close()
     created = [d for d in (output.make_parents(p) for p in (out, args.json) if p) if d]
     result.write(out, exposure=args.exposure)
     if args.json:
@@ -163,6 +165,20 @@ def cmd_render(args):
                                       "stats": result.stats.as_dict()})
     _print_summary(result, out, args.stats, created=created)
     return 0
+
+
+SCHEDULER_HELP = ("render on Dask (needs raysort[distributed]): the address of a running "
+                  "scheduler (tcp://HOST:8786), or local[:N] for N single-threaded worker "
+                  "processes here (default: one per core); --threads does not apply")
+
+
+def dask_client(scheduler):
+    """A context giving the Dask client of ``--scheduler``, or None without one."""
+    if scheduler is None:
+        return contextlib.nullcontext()
+    from raysort.distributed import connect
+
+    return connect(scheduler)
 
 
 # --------------------------------------------------------------------------
@@ -241,6 +257,7 @@ def build_parser():
                    help="shadow rays to the scene's point lights (default: on if it has any)")
     r.add_argument("--threads", type=_positive, default=_usable_cores(),
                    help="worker threads (default: the usable cores, %(default)s here)")
+    r.add_argument("--scheduler", default=None, metavar="ADDRESS", help=SCHEDULER_HELP)
     r.add_argument("--tile", type=_positive, default=32, help="tile edge in pixels (32)")
     r.add_argument("--exposure", type=_exposure, default=0.0,
                    help="PNG exposure in stops, -64..64 (0)")
@@ -262,6 +279,8 @@ def build_parser():
 
     from raysort.bench import add_parser as add_bench_parser
     add_bench_parser(sub)
+    from raysort.sweep import add_parser as add_sweep_parser
+    add_sweep_parser(sub)
     return parser
 
 

@@ -15,6 +15,7 @@ __all__ = [
     "UnknownPluginError",
     "PluginLoadError",
     "PluginContractError",
+    "ClusterError",
 ]
 
 
@@ -57,3 +58,7 @@ class PluginLoadError(PluginError):
 
 class PluginContractError(PluginError):
     """A plugin returned something that breaks its kind's contract."""
+
+
+class ClusterError(RaysortError):
+    """A Dask cluster cannot be reached, lost its workers, or keeps losing a task."""

@@ -13,8 +13,9 @@ How a render is organised (and why it is deterministic):
 * A tile's passes are processed in batches of about ``batch_rays`` rays; each
   batch goes through every bounce before the next batch starts, so memory is
   bounded by the batch, never by image size x spp.
-* Tiles are spread over ``threads`` worker threads; all kernels release the
-  GIL.  A tile accumulates its radiance in its own buffer in a fixed order
+* Tiles are spread over ``threads`` worker threads (all kernels release the
+  GIL), or over the workers of a Dask cluster (:mod:`raysort.distributed`).
+  A tile accumulates its radiance in its own buffer in a fixed order
   (batch, bounce, ray index), and hits are scattered back to generation
   order before shading, so the image is bit-identical for every sorter,
   traversal and thread count at a fixed seed.
@@ -356,7 +357,7 @@ class Pipeline:
 
     # ------------------------------------------------------------------
     def render(self, width=256, height=256, spp=4, seed=0, *, progress=None, aov=(),
-               tap=None):
+               tap=None, client=None):
         """Render the scene's camera view; returns a :class:`RenderResult`.
 
         ``progress(done_tiles, total_tiles)`` is called as tiles finish, with
@@ -366,12 +367,19 @@ class Pipeline:
         ``tap(record)`` is called with a :class:`Traced` record for every batch of rays
         the render traces (from the worker threads when ``threads > 1``): the rays of a
         real render, e.g. for :mod:`raysort.workloads`.
+        ``client``, a ``dask.distributed.Client``, renders the tiles as tasks on its
+        workers instead of local threads (``threads`` does not apply; see
+        :mod:`raysort.distributed`); the image is the same, bit for bit.  ``aov`` and
+        ``tap`` need the rays in this process and are not available with ``client``.
         """
         width, height = integer("width", width, 1), integer("height", height, 1)
         spp, seed = integer("spp", spp, 1, MAX_RAYS), integer("seed", seed, 0, MAX_SEED)
         if not (progress is None or callable(progress)):
             raise ConfigError(f"progress must be a callable or None, got {progress!r}")
         _check_image_size(width, height)
+        if client is not None and (aov or tap is not None):
+            raise ConfigError("aov layers and tap need the rays in this process; they are not "
+                              "available with client= (render locally for them)")
         collector = None
         if aov:
             from raysort.aov import AovCollector
@@ -379,8 +387,6 @@ class Pipeline:
             collector = AovCollector(aov, self.scene, width, height)
             tap = collector if tap is None else _both(collector, tap)
         start = time.perf_counter()
-        self.bvh  # build before the workers start
-        contract.call_plugin("shaders", self.shader, "prepare", self.scene)
         tiles = [(x, y) for y in range(0, height, self.tile) for x in range(0, width, self.tile)]
         image = np.zeros((height, width, 3), dtype=np.float32)
         stats = RenderStats(threads=self.threads)
@@ -393,32 +399,43 @@ class Pipeline:
             image[y0:y0 + h, x0:x0 + w] = (radiance / spp).reshape(h, w, 3).astype(np.float32)
             stats.merge(tile_stats)
 
-        done = 0
-        if self.threads == 1:
-            for tile in tiles:
-                finish(tile, self._render_tile(tile, width, height, spp, seed, tap))
-                done += 1
+        if client is not None:
+            from raysort import distributed
+
+            stats.threads = distributed.worker_threads(client)
+            finished = distributed.render_tiles(self, client, tiles, width, height, spp, seed)
+        else:
+            self.bvh  # build before the workers start
+            contract.call_plugin("shaders", self.shader, "prepare", self.scene)
+            finished = self._local_tiles(tiles, width, height, spp, seed, tap)
+        try:
+            for done, (tile, result) in enumerate(finished, 1):
+                finish(tile, result)
                 if progress:
                     progress(done, len(tiles))
-        else:
-            with ThreadPoolExecutor(max_workers=self.threads) as pool:
-                futures = {pool.submit(self._render_tile, tile, width, height, spp, seed,
-                                       tap): tile for tile in tiles}
-                try:
-                    for future in as_completed(futures):
-                        finish(futures.pop(future), future.result())
-                        done += 1
-                        if progress:
-                            progress(done, len(tiles))
-                except BaseException:
-                    for f in list(futures):
-                        f.cancel()
-                    raise
+        finally:
+            finished.close()
         stats.wall_seconds = time.perf_counter() - start
         # what determines the image (not how it was computed: threads live in stats)
         settings = dict(self.describe(), scene=self.scene.name, width=width, height=height,
                         spp=spp, seed=seed, tile=self.tile)
         return RenderResult(image, stats, settings, collector.layers() if collector else {})
+
+    def _local_tiles(self, tiles, width, height, spp, seed, tap=None):
+        """``(tile, _render_tile(tile))`` as tiles finish on this process's threads."""
+        if self.threads == 1:
+            for tile in tiles:
+                yield tile, self._render_tile(tile, width, height, spp, seed, tap)
+            return
+        with ThreadPoolExecutor(max_workers=self.threads) as pool:
+            futures = {pool.submit(self._render_tile, tile, width, height, spp, seed, tap): tile
+                       for tile in tiles}
+            try:
+                for future in as_completed(futures):
+                    yield futures.pop(future), future.result()
+            finally:  # an error, or the caller stopped early: start no more tiles
+                for f in futures:
+                    f.cancel()
 
     def _render_tile(self, tile, width, height, spp, seed, tap=None):
         x0, y0 = tile

@@ -296,7 +296,7 @@ def test_png_peak_memory_stays_near_the_image_size(tmp_path):
     image's size to the process's peak resident memory: Pillow's 8-bit picture (a third)
     plus a block of rows.  Tone mapping the whole image in float64 at once added ~10x."""
     proc = subprocess.run([sys.executable, "-c", PEAK_SCRIPT, str(tmp_path / "big.png")],
-                          capture_output=True, text=True, timeout=600)
+                          capture_output=True, text=True, timeout=600, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     image_bytes, extra_peak = map(int, proc.stdout.split())
     assert extra_peak <= image_bytes // 2, (
@@ -379,7 +379,7 @@ def test_concurrent_writers_leave_matching_pairs(tmp_path):
     pixels are the tone map of the EXR's value)."""
     go, targets = tmp_path / "go", 12
     writers = [subprocess.Popen([sys.executable, "-c", PAIR_WRITER, str(tmp_path), str(v),
-                                 str(go), str(targets)])
+                                 str(go), str(targets)], cwd=tmp_path)
                for v in (0.1, 0.3, 0.6, 0.9)]
     go.touch()
     assert [w.wait(timeout=600) for w in writers] == [0] * 4
