@@ -482,6 +482,8 @@ class Pipeline:
                 packets = np.searchsorted(bounce.parent, packets).astype(np.int32)
                 paths = paths.take(bounce.parent, bounce.throughput)
                 rays = bounce.rays
+                if rays.prev_t is None:     # each path's last hit distance, for sorters
+                    rays.prev_t = hits.t[bounce.parent]
                 depth += 1
                 if depth > MAX_BOUNCES and len(rays):
                     raise contract.plugin_error("shaders", self.shader, f"shade() still returns "

@@ -69,15 +69,21 @@ class RayBatch:
     ``data`` has shape ``(8, capacity)``; lanes past ``n`` are padding and
     inactive.  The row views (``origins``, ``directions``, ``tmin``, ``tmax``)
     cover the first ``n`` lanes only.
+
+    ``prev_t`` is None or float32 ``(n,)``: for a bounce ray, the hit distance of
+    the ray its path continues (the pipeline sets it after shading), which sorters
+    may use to estimate where the ray ends; NaN or inf where unknown.  It never
+    affects hits.
     """
 
-    __slots__ = ("data", "n")
+    __slots__ = ("data", "n", "prev_t")
 
     def __init__(self, n):
         if isinstance(n, bool) or not isinstance(n, numbers.Integral) or not 0 <= n <= MAX_RAYS:
             raise ConfigError(f"a ray batch holds 0..{MAX_RAYS} rays, got {n!r}")
         n = int(n)
         self.n = n
+        self.prev_t = None
         self.data = aligned_empty((8, max(_round4(n), 4)), np.float32)
         self.data[:] = 0.0
         self.data[6, n:] = np.inf
@@ -143,6 +149,8 @@ class RayBatch:
         self.data[6, n:] = np.inf
         self.data[7, n:] = -np.inf
         self.n = int(n)
+        if self.prev_t is not None:
+            self.prev_t = self.prev_t[:n]
         return self
 
     def take(self, index):
@@ -150,6 +158,8 @@ class RayBatch:
         index = np.asarray(index, dtype=np.intp)
         out = RayBatch(len(index))
         out.data[:, :len(index)] = self.data[:, index]
+        if self.prev_t is not None:
+            out.prev_t = self.prev_t[index]
         return out
 
 

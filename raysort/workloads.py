@@ -179,4 +179,6 @@ def _concat(batches):
     out = RayBatch(sum(len(b) for b in batches))
     if batches:
         out.data[:, :len(out)] = np.concatenate([b.data[:, :len(b)] for b in batches], axis=1)
+        if all(b.prev_t is not None for b in batches):
+            out.prev_t = np.concatenate([b.prev_t for b in batches])
     return out
