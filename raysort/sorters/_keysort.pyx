@@ -28,13 +28,14 @@ Coordinates that are NaN map to 0 and everything is clamped to [0, 1], so no
 ray (NaN, infinite, zero direction) can make the kernel misbehave; the gather
 marks such rays inactive anyway.
 """
-from libc.math cimport INFINITY, fabsf, sqrtf
+from libc.math cimport INFINITY, copysignf, fabsf, sqrtf
 from libc.stdint cimport int32_t, int64_t, uint32_t, uint64_t
 from libc.string cimport memset
+from raysort._types cimport rs_maxf, rs_minf
 
 import numpy as np
 
-from raysort.sdk import MAX_PACKET, ConfigError, Sorter, check_packets, integer
+from raysort.sdk import MAX_PACKET, ConfigError, Sorter, boolean, check_packets, integer
 
 #: bits each coordinate is quantised to (a key table has two byte-tables per coordinate)
 COORD_BITS = 16
@@ -54,46 +55,42 @@ COORDINATES = {"components": DIR_COMPONENTS, "octahedral": DIR_OCTAHEDRAL,
 # the same), so that a ray ending on the far wall keeps its wall's cell
 cdef float EXIT_SHRINK = 1.0 - 1.0e-3
 cdef float QMAX = 65535.0   # 2**COORD_BITS - 1
+cdef float ONE = 1.0        # float constants: a bare 0.5 or 1.0 would make the C double
+cdef float HALF = 0.5
+#: bits of the octant prefix (the signs of dx, dy, dz)
+OCTANT_BITS = 3
 
 
 cdef inline float unit(float x) noexcept nogil:
-    """x clamped to [0, 1]; NaN -> 0 (comparisons with NaN are false)."""
-    if x > 0:
-        return x if x < 1 else 1
-    return 0
+    """x clamped to [0, 1]; NaN -> 0 (MAXSS/MINSS semantics: no branch)."""
+    return rs_minf(rs_maxf(x, 0), 1)
 
 
 cdef inline uint32_t quantise(float x) noexcept nogil:
     return <uint32_t> (unit(x) * QMAX)
 
 
-cdef inline float exit_distance(float o, float d, float lo, float hi) noexcept nogil:
-    """Distance along d (unit) at which the slab [lo, hi] is left; inf if parallel."""
-    if d > 0:
-        return (hi - o) / d
-    if d < 0:
-        return (lo - o) / d
-    return INFINITY
-
-
 cdef void ray_keys(const float *ox, const float *oy, const float *oz, const float *dx,
                    const float *dy, const float *dz, const float *tmax, const float *prev_t,
                    int n, int mode, const float *lo, const float *hi, const float *scale,
-                   float length, float prev_scale, const uint64_t *table,
+                   float length, float prev_scale, const uint64_t *table, bint octant,
                    uint64_t *keys) noexcept nogil:
+    """The key of rays [0, n).  The float work is branch free (min/max and selects by
+    multiplication): diffuse directions would mispredict a branch on a sign half the
+    time, which costs more than all the arithmetic."""
     cdef int i, k, n_coords = 5 if mode == DIR_OCTAHEDRAL else 6
     cdef float o[3]
     cdef float d[3]
     cdef float c[6]
-    cdef float norm, inv, s, L, p, ex
+    cdef float inv, s, L, p, ex, u, v, fu, fv, below, r
     cdef uint32_t q
     cdef uint64_t key
     for i in range(n):
         o[0] = ox[i]
         o[1] = oy[i]
         o[2] = oz[i]
-        norm = sqrtf(dx[i] * dx[i] + dy[i] * dy[i] + dz[i] * dz[i])
-        inv = 1.0 / norm            # inf or NaN for a zero or non-finite direction
+        # 1 / |d|: inf or NaN for a zero or non-finite direction (its key is then arbitrary)
+        inv = ONE / sqrtf(dx[i] * dx[i] + dy[i] * dy[i] + dz[i] * dz[i])
         d[0] = dx[i] * inv
         d[1] = dy[i] * inv
         d[2] = dz[i] * inv
@@ -101,17 +98,17 @@ cdef void ray_keys(const float *ox, const float *oy, const float *oz, const floa
             c[k] = (o[k] - lo[k]) * scale[k]
         if mode == DIR_COMPONENTS:
             for k in range(3):
-                c[3 + k] = 0.5 * d[k] + 0.5
+                c[3 + k] = HALF * d[k] + HALF
         elif mode == DIR_OCTAHEDRAL:
-            s = 1.0 / (fabsf(d[0]) + fabsf(d[1]) + fabsf(d[2]))
-            c[3] = d[0] * s
-            c[4] = d[1] * s
-            if d[2] < 0:            # fold the lower hemisphere over the diagonals
-                p = c[3]
-                c[3] = (1 - fabsf(c[4])) * (-1 if p < 0 else 1)
-                c[4] = (1 - fabsf(p)) * (-1 if c[4] < 0 else 1)
-            c[3] = 0.5 * c[3] + 0.5
-            c[4] = 0.5 * c[4] + 0.5
+            s = ONE / (fabsf(d[0]) + fabsf(d[1]) + fabsf(d[2]))
+            u = d[0] * s
+            v = d[1] * s
+            # the lower hemisphere (below = 1) folds over the diagonals
+            fu = copysignf(ONE - fabsf(v), u)
+            fv = copysignf(ONE - fabsf(u), v)
+            below = <float> (d[2] < 0)
+            c[3] = HALF * (u + below * (fu - u)) + HALF
+            c[4] = HALF * (v + below * (fv - v)) + HALF
         else:
             L = length
             if prev_t != NULL:
@@ -120,31 +117,33 @@ cdef void ray_keys(const float *ox, const float *oy, const float *oz, const floa
                     L = p * prev_scale
             if not tmax[i] >= L:    # also when tmax is NaN or negative
                 L = tmax[i] if tmax[i] > 0 else 0
+            # where the ray leaves the scene box (for an origin inside it), pulled in a little
             ex = INFINITY
             for k in range(3):
-                p = exit_distance(o[k], d[k], lo[k], hi[k])
-                if p < ex:
-                    ex = p
-            ex = ex * EXIT_SHRINK
-            if ex < L:
-                L = ex if ex > 0 else 0
+                r = ONE / d[k]
+                ex = rs_minf(ex, rs_maxf((lo[k] - o[k]) * r, (hi[k] - o[k]) * r))
+            L = rs_minf(rs_maxf(ex * EXIT_SHRINK, 0), L)
             for k in range(3):
                 c[3 + k] = (o[k] + L * d[k] - lo[k]) * scale[k]
         key = 0
         for k in range(n_coords):
             q = quantise(c[k])
             key |= table[(2 * k) * 256 + (q & 255)] | table[(2 * k + 1) * 256 + (q >> 8)]
+        if octant:                  # the direction's octant first (bit k: d[k] < 0)
+            key = (key >> 3 | <uint64_t> (dx[i] < 0) << 63 | <uint64_t> (dy[i] < 0) << 62
+                   | <uint64_t> (dz[i] < 0) << 61)
         keys[i] = key
 
 
 def make_keys(rays, str coordinates, bounds, const uint64_t[:, :, ::1] table, *,
-              float length=0, prev_t=None, float prev_scale=1):
+              float length=0, prev_t=None, float prev_scale=1, bint octant=False):
     """uint64 keys of a :class:`~raysort.rays.RayBatch` (see the module docstring).
 
     ``coordinates``: a key of :data:`COORDINATES`; ``bounds``: the (2, 3) scene box;
     ``table``: from :func:`key_table`; ``length``: the end-point distance (world
     units) where ``prev_t`` (float32 per ray, or None) is not a positive finite
-    number, which otherwise gives ``prev_t * prev_scale``.
+    number, which otherwise gives ``prev_t * prev_scale``; ``octant``: the top
+    :data:`OCTANT_BITS` bits are the signs of the direction, the table's key follows.
     """
     cdef int n = len(rays), mode = COORDINATES[coordinates]
     box = np.asarray(bounds, dtype=np.float32)
@@ -175,7 +174,8 @@ def make_keys(rays, str coordinates, bounds, const uint64_t[:, :, ::1] table, *,
                          f"{(table.shape[0], table.shape[1], table.shape[2])}")
     with nogil:
         ray_keys(&ox[0], &oy[0], &oz[0], &dx[0], &dy[0], &dz[0], &tmax[0], prev_ptr, n, mode,
-                 &lo[0], &hi[0], &scale[0], length, prev_scale, &table[0, 0, 0], &keys[0])
+                 &lo[0], &hi[0], &scale[0], length, prev_scale, &table[0, 0, 0], octant,
+                 &keys[0])
     return out
 
 
@@ -216,16 +216,16 @@ cdef int radix_sort(uint64_t *key, int32_t *item, uint64_t *key_tmp, int32_t *it
     """Stable LSD radix sort of (key, item) by the top ``digits`` bytes of key.
 
     Returns 1 when the result is in the tmp arrays, 0 when in key/item."""
-    cdef int64_t count[8][256]
+    cdef int32_t count[8][256]
     cdef int i, j, shift, flip = 0
-    cdef int64_t pos, c
+    cdef int32_t pos, c
     cdef uint64_t *ks = key
     cdef uint64_t *kd = key_tmp
     cdef int32_t *is_ = item
     cdef int32_t *id_ = item_tmp
     cdef uint64_t *kt
     cdef int32_t *it
-    memset(count, 0, sizeof(count))
+    memset(count, 0, digits * sizeof(count[0]))
     for i in range(n):
         for j in range(digits):
             count[j][(key[i] >> (56 - 8 * j)) & 255] += 1
@@ -340,13 +340,19 @@ class KeySorter(Sorter):
     #: Garanzha and Loop's compress-sort-decompress (same order, fewer items to sort)
     compress = False
 
-    def _setup(self, levels, bits, packet_size, split_bits):
-        """Validate the common parameters and build the key table."""
+    def _setup(self, levels, bits, packet_size, split_bits, octant=False):
+        """Validate the common parameters and build the key table.
+
+        ``octant``: prefix the key with the direction's octant and never let a
+        sub-packet mix octants (the key's ``bits`` then include the 3 octant bits)."""
         self.packet_size = integer("packet_size", packet_size, 1, MAX_PACKET)
-        levels = _truncate(levels, 64)
-        self.bits = integer("bits", bits, 1, sum(len(level) for level in levels))
-        self._table, _ = key_table(_truncate(levels, self.bits))
+        self.octant = boolean("octant", octant)
+        prefix = OCTANT_BITS if self.octant else 0
+        levels = _truncate(levels, 64 - prefix)
+        self.bits = integer("bits", bits, 1 + prefix, prefix + sum(len(lv) for lv in levels))
+        self._table, _ = key_table(_truncate(levels, self.bits - prefix))
         self.split_bits = integer("split_bits", split_bits, 0, self.bits)
+        self._split = max(self.split_bits, prefix)
         self._digits = (self.bits + 7) // 8
 
     def end_length(self, rays, bounds):
@@ -357,13 +363,13 @@ class KeySorter(Sorter):
         """The uint64 key of every ray (left aligned, ``bits`` significant bits)."""
         length, prev_t, prev_scale = self.end_length(rays, bounds)
         return make_keys(rays, self.coordinates, bounds, self._table, length=length,
-                         prev_t=prev_t, prev_scale=prev_scale)
+                         prev_t=prev_t, prev_scale=prev_scale, octant=self.octant)
 
     def sort(self, rays, packets, bounds):
         packets = check_packets(packets, len(rays))
         bounds = np.asarray(bounds, dtype=np.float32).reshape(2, 3)
         return sort_keys(self.keys(rays, bounds), packets, self._digits, compress=self.compress,
-                         packet_size=self.packet_size, split_bits=self.split_bits)
+                         packet_size=self.packet_size, split_bits=self._split)
 
 
 def _truncate(levels, bits):

@@ -71,15 +71,19 @@ class OriginDirectionSorter(KeySorter):
     packet_size  int     64            most rays per sub-packet (1 .. 4096)
     split_bits   int     0             also start a sub-packet where the key's
                                        top ``split_bits`` bits change (0: never)
+    octant       bool    True          prefix the key with the direction's octant
+                                       and never mix octants in a sub-packet
+                                       (False: the paper's key alone)
     ===========  ======  ============  ==========================================
     """
 
     trusted = True
 
-    def __init__(self, *, layout="interleaved", lead=3, bits=32, packet_size=64, split_bits=0):
+    def __init__(self, *, layout="interleaved", lead=3, bits=32, packet_size=64, split_bits=0,
+                 octant=True):
         if layout not in LAYOUTS:
             raise ConfigError(f"layout must be one of {', '.join(LAYOUTS)}; got {layout!r}")
         self.layout = layout
         self.lead = integer("lead", lead, 0, COORD_BITS)
         self.coordinates = LAYOUTS[layout]
-        self._setup(_levels(layout, self.lead), bits, packet_size, split_bits)
+        self._setup(_levels(layout, self.lead), bits, packet_size, split_bits, octant)

@@ -34,15 +34,19 @@ class TerminationSorter(TwoPointSorter):
     packet_size  int     64       most rays per sub-packet (1 .. 4096)
     split_bits   int     0        also start a sub-packet where the key's
                                   top ``split_bits`` bits change (0: never)
+    octant       bool    True     prefix the key with the direction's octant
+                                  and never mix octants in a sub-packet
+                                  (False: the paper's key alone)
     ===========  ======  =======  ==========================================
     """
 
     trusted = True
 
-    def __init__(self, *, scale=1.0, length=0.25, bits=32, packet_size=64, split_bits=0):
+    def __init__(self, *, scale=1.0, length=0.25, bits=32, packet_size=64, split_bits=0,
+                 octant=True):
         self.scale = number("scale", scale, 0)
         super().__init__(length=length, bits=bits, packet_size=packet_size,
-                         split_bits=split_bits)
+                         split_bits=split_bits, octant=octant)
 
     def end_length(self, rays, bounds):
         return self.length * scene_diagonal(bounds), getattr(rays, "prev_t", None), self.scale

@@ -33,15 +33,18 @@ class TwoPointSorter(KeySorter):
     packet_size  int     64       most rays per sub-packet (1 .. 4096)
     split_bits   int     0        also start a sub-packet where the key's
                                   top ``split_bits`` bits change (0: never)
+    octant       bool    True     prefix the key with the direction's octant
+                                  and never mix octants in a sub-packet
+                                  (False: the paper's key alone)
     ===========  ======  =======  ==========================================
     """
 
     trusted = True
     coordinates = "end_point"
 
-    def __init__(self, *, length=0.25, bits=32, packet_size=64, split_bits=0):
+    def __init__(self, *, length=0.25, bits=32, packet_size=64, split_bits=0, octant=True):
         self.length = number("length", length, 0)
-        self._setup(TWO_POINT_LEVELS, bits, packet_size, split_bits)
+        self._setup(TWO_POINT_LEVELS, bits, packet_size, split_bits, octant)
 
     def end_length(self, rays, bounds):
         return self.length * scene_diagonal(bounds), None, 1.0
