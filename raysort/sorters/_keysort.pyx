@@ -73,8 +73,8 @@ cdef inline uint32_t quantise(float x) noexcept nogil:
 cdef void ray_keys(const float *ox, const float *oy, const float *oz, const float *dx,
                    const float *dy, const float *dz, const float *tmax, const float *prev_t,
                    int n, int mode, const float *lo, const float *hi, const float *scale,
-                   float length, float prev_scale, const uint64_t *table, bint octant,
-                   uint64_t *keys) noexcept nogil:
+                   float length, float prev_scale, const uint64_t *table, bint low_bytes,
+                   bint octant, uint64_t *keys) noexcept nogil:
     """The key of rays [0, n).  The float work is branch free (min/max and selects by
     multiplication): diffuse directions would mispredict a branch on a sign half the
     time, which costs more than all the arithmetic."""
@@ -89,8 +89,10 @@ cdef void ray_keys(const float *ox, const float *oy, const float *oz, const floa
         o[0] = ox[i]
         o[1] = oy[i]
         o[2] = oz[i]
-        # 1 / |d|: inf or NaN for a zero or non-finite direction (its key is then arbitrary)
-        inv = ONE / sqrtf(dx[i] * dx[i] + dy[i] * dy[i] + dz[i] * dz[i])
+        # d / |d| (inf or NaN for a zero or non-finite direction: its key is then arbitrary);
+        # the octahedral map divides by |d|_1 itself and needs no unit vector
+        inv = ONE if mode == DIR_OCTAHEDRAL else ONE / sqrtf(dx[i] * dx[i] + dy[i] * dy[i]
+                                                              + dz[i] * dz[i])
         d[0] = dx[i] * inv
         d[1] = dy[i] * inv
         d[2] = dz[i] * inv
@@ -126,9 +128,13 @@ cdef void ray_keys(const float *ox, const float *oy, const float *oz, const floa
             for k in range(3):
                 c[3 + k] = (o[k] + L * d[k] - lo[k]) * scale[k]
         key = 0
-        for k in range(n_coords):
-            q = quantise(c[k])
-            key |= table[(2 * k) * 256 + (q & 255)] | table[(2 * k + 1) * 256 + (q >> 8)]
+        if low_bytes:
+            for k in range(n_coords):
+                q = quantise(c[k])
+                key |= table[(2 * k) * 256 + (q & 255)] | table[(2 * k + 1) * 256 + (q >> 8)]
+        else:                       # a short key uses only the top byte of every coordinate
+            for k in range(n_coords):
+                key |= table[(2 * k + 1) * 256 + (quantise(c[k]) >> 8)]
         if octant:                  # the direction's octant first (bit k: d[k] < 0)
             key = (key >> 3 | <uint64_t> (dx[i] < 0) << 63 | <uint64_t> (dy[i] < 0) << 62
                    | <uint64_t> (dz[i] < 0) << 61)
@@ -172,9 +178,10 @@ def make_keys(rays, str coordinates, bounds, const uint64_t[:, :, ::1] table, *,
     if table.shape[0] != MAX_COORDS or table.shape[1] != 2 or table.shape[2] != 256:
         raise ValueError(f"a key table has shape ({MAX_COORDS}, 2, 256), got "
                          f"{(table.shape[0], table.shape[1], table.shape[2])}")
+    cdef bint low_bytes = bool(np.asarray(table)[:, 0].any())
     with nogil:
         ray_keys(&ox[0], &oy[0], &oz[0], &dx[0], &dy[0], &dz[0], &tmax[0], prev_ptr, n, mode,
-                 &lo[0], &hi[0], &scale[0], length, prev_scale, &table[0, 0, 0], octant,
+                 &lo[0], &hi[0], &scale[0], length, prev_scale, &table[0, 0, 0], low_bytes, octant,
                  &keys[0])
     return out
 

@@ -66,7 +66,7 @@ class OriginDirectionSorter(KeySorter):
                                        (see the module docstring)
     lead         int     3             leading levels of origin bits (direction
                                        bits for direction_first), 0 .. 16
-    bits         int     32            key bits sorted (the top ones; a radix
+    bits         int     24            key bits sorted (the top ones; a radix
                                        pass per 8 bits), 1 .. 64
     packet_size  int     64            most rays per sub-packet (1 .. 4096)
     split_bits   int     0             also start a sub-packet where the key's
@@ -79,7 +79,7 @@ class OriginDirectionSorter(KeySorter):
 
     trusted = True
 
-    def __init__(self, *, layout="interleaved", lead=3, bits=32, packet_size=64, split_bits=0,
+    def __init__(self, *, layout="interleaved", lead=3, bits=24, packet_size=64, split_bits=0,
                  octant=True):
         if layout not in LAYOUTS:
             raise ConfigError(f"layout must be one of {', '.join(LAYOUTS)}; got {layout!r}")

@@ -30,7 +30,7 @@ class TerminationSorter(TwoPointSorter):
                                   previous bounce's hit distance
     length       float   0.25     fallback length where that is unknown, as
                                   a fraction of the scene box's diagonal
-    bits         int     32       key bits sorted (the top ones), 1 .. 64
+    bits         int     24       key bits sorted (the top ones), 1 .. 64
     packet_size  int     64       most rays per sub-packet (1 .. 4096)
     split_bits   int     0        also start a sub-packet where the key's
                                   top ``split_bits`` bits change (0: never)
@@ -42,7 +42,7 @@ class TerminationSorter(TwoPointSorter):
 
     trusted = True
 
-    def __init__(self, *, scale=1.0, length=0.25, bits=32, packet_size=64, split_bits=0,
+    def __init__(self, *, scale=1.0, length=0.25, bits=24, packet_size=64, split_bits=0,
                  octant=True):
         self.scale = number("scale", scale, 0)
         super().__init__(length=length, bits=bits, packet_size=packet_size,

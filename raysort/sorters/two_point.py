@@ -29,7 +29,7 @@ class TwoPointSorter(KeySorter):
     ===========  ======  =======  ==========================================
     length       float   0.25     estimated ray length, as a fraction of the
                                   scene box's diagonal (hippie's default)
-    bits         int     32       key bits sorted (the top ones), 1 .. 64
+    bits         int     24       key bits sorted (the top ones), 1 .. 64
     packet_size  int     64       most rays per sub-packet (1 .. 4096)
     split_bits   int     0        also start a sub-packet where the key's
                                   top ``split_bits`` bits change (0: never)
@@ -42,7 +42,7 @@ class TwoPointSorter(KeySorter):
     trusted = True
     coordinates = "end_point"
 
-    def __init__(self, *, length=0.25, bits=32, packet_size=64, split_bits=0, octant=True):
+    def __init__(self, *, length=0.25, bits=24, packet_size=64, split_bits=0, octant=True):
         self.length = number("length", length, 0)
         self._setup(TWO_POINT_LEVELS, bits, packet_size, split_bits, octant)
 

@@ -1,0 +1,293 @@
+"""The sort-key sorters (origin_direction, two_point, termination, garanzha).
+
+Checked against references written here from the documented formulas, not
+against stored output:
+
+* the bit split of a key table equals a bit-by-bit interleave of the levels;
+* the coordinates the kernel quantises (origin in the box, direction
+  components, octahedral map, the end point with its length, tmax and box-exit
+  clamps, and the previous hit distance of ``termination``) equal float64
+  formulas within one quantisation step;
+* the order is a stable sort by key inside every large packet (numpy lexsort),
+  with and without Garanzha and Loop's compression;
+* sub-packets are cut at ``packet_size``, at changes of the key's top
+  ``split_bits`` and never across octants when ``octant`` is on;
+* a render's bounce rays carry the previous bounce's hit distance.
+"""
+import numpy as np
+import pytest
+
+import raysort
+from raysort.errors import ConfigError
+from raysort.rays import RayBatch
+from raysort.sorters import _keysort
+from raysort.sorters.garanzha import GaranzhaSorter
+from raysort.sorters.origin_direction import LAYOUTS, OriginDirectionSorter
+from raysort.sorters.termination import TerminationSorter
+from raysort.sorters.two_point import TwoPointSorter
+
+from _helpers import random_rays
+
+BOX = np.array([[-3.0, -1.0, 2.0], [5.0, 4.0, 3.5]], dtype=np.float32)
+QMAX = 2 ** _keysort.COORD_BITS - 1
+KEY_SORTERS = ["origin_direction", "two_point", "termination", "garanzha"]
+
+
+# -- key tables --------------------------------------------------------------------
+
+def reference_key(q, levels):
+    """Bit-by-bit interleave: level by level, each listed coordinate's next bit."""
+    key, used, pos = 0, [0] * 6, 63
+    for level in levels:
+        for coord in level:
+            bit = 15 - used[coord]
+            key |= ((int(q[coord]) >> bit) & 1) << pos
+            used[coord] += 1
+            pos -= 1
+    return key
+
+
+def apply_table(table, q):
+    """The kernel's lookup: OR of two byte-tables per coordinate."""
+    key = np.zeros(q.shape[1], dtype=np.uint64)
+    for k in range(6):
+        key |= table[k, 0, q[k] & 255] | table[k, 1, q[k] >> 8]
+    return key
+
+
+@pytest.mark.parametrize("levels", [
+    [(0, 1, 2)] * 16,
+    [(0, 1, 2)] * 3 + [(0, 1, 2, 3, 4, 5)] * 9 + [(0,)],
+    [(3, 4)] * 4 + [(0, 1, 2)] * 15 + [(5,)],
+    [(0, 1, 2)] * 5 + [(3, 4)] * 3,
+    [(5, 0)] * 16,
+], ids=["origin", "aila", "costa", "hash", "pairs"])
+def test_key_table_is_the_interleave(levels, rng):
+    table, bits = _keysort.key_table(levels)
+    assert bits == sum(len(level) for level in levels)
+    q = rng.integers(0, QMAX + 1, size=(6, 300)).astype(np.uint32)
+    got = apply_table(table, q)
+    want = [reference_key(q[:, i], levels) for i in range(q.shape[1])]
+    assert [int(k) for k in got] == want
+
+
+def test_key_table_limits():
+    with pytest.raises(ValueError, match="64 bits"):
+        _keysort.key_table([(0, 1, 2, 3, 4, 5)] * 11)
+    with pytest.raises(ValueError, match="only 16 bits"):
+        _keysort.key_table([(0,)] * 17)
+
+
+# -- coordinates -------------------------------------------------------------------
+
+def quantised(sorter_coordinates, rays, bounds, k, **kw):
+    """The kernel's quantised coordinate k of every ray (a table with only k's bits)."""
+    table, _ = _keysort.key_table([(k,)] * 16)
+    keys = _keysort.make_keys(rays, sorter_coordinates, bounds, table, **kw)
+    return (keys >> np.uint64(48)).astype(np.int64)
+
+
+def reference_coords(rays, bounds, mode, length=0.0, prev_t=None, prev_scale=1.0):
+    """float64 coordinates in [0, 1] from the documented formulas."""
+    lo, hi = (np.asarray(b, np.float64) for b in bounds)
+    o = rays.origins.astype(np.float64)
+    d = rays.directions.astype(np.float64)
+    d = d / np.linalg.norm(d, axis=0)
+    c = [(o[k] - lo[k]) / (hi[k] - lo[k]) for k in range(3)]
+    if mode == "components":
+        c += [(d[k] + 1) / 2 for k in range(3)]
+    elif mode == "octahedral":
+        s = np.abs(d).sum(axis=0)
+        u, v = d[0] / s, d[1] / s
+        below = d[2] < 0
+        fu = (1 - np.abs(v)) * np.where(u < 0, -1, 1)
+        fv = (1 - np.abs(u)) * np.where(v < 0, -1, 1)
+        c += [(np.where(below, fu, u) + 1) / 2, (np.where(below, fv, v) + 1) / 2]
+    else:
+        L = np.full(len(rays), length)
+        if prev_t is not None:
+            known = (prev_t > 0) & np.isfinite(prev_t)
+            L[known] = prev_t[known] * prev_scale
+        L = np.minimum(L, rays.tmax)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            exits = np.where(d > 0, (hi[:, None] - o) / d, (lo[:, None] - o) / d)
+        L = np.minimum(L, np.maximum(exits.min(axis=0) * (1 - 1e-3), 0))
+        end = o + L * d
+        c += [(end[k] - lo[k]) / (hi[k] - lo[k]) for k in range(3)]
+    return [np.floor(np.clip(x, 0, 1) * QMAX).astype(np.int64) for x in c]
+
+
+def inside_rays(rng, n):
+    """Rays from inside BOX (so the box-exit clamp is defined), unnormalised directions."""
+    origins = BOX[0] + rng.random((n, 3)) * (BOX[1] - BOX[0])
+    directions = rng.normal(size=(n, 3)) * rng.uniform(0.2, 5, size=(n, 1))
+    tmax = np.where(rng.random(n) < 0.3, rng.uniform(0.1, 3, n), np.inf)
+    return RayBatch.from_arrays(origins, directions, 0.0, tmax)
+
+
+@pytest.mark.parametrize("mode", ["components", "octahedral"])
+def test_origin_and_direction_coordinates(mode, rng):
+    rays = inside_rays(rng, 2000)
+    want = reference_coords(rays, BOX, mode)
+    for k in range(6 if mode == "components" else 5):
+        got = quantised(mode, rays, BOX, k)
+        assert np.abs(got - want[k]).max() <= 1, f"coordinate {k}"
+
+
+@pytest.mark.parametrize("prev", [None, "some"], ids=["fixed-length", "prev_t"])
+def test_end_point_coordinates(prev, rng):
+    rays = inside_rays(rng, 2000)
+    prev_t = None
+    if prev:
+        prev_t = rng.uniform(0, 4, len(rays)).astype(np.float32)
+        prev_t[::5] = np.nan                    # unknown: the fixed length
+        prev_t[1::7] = np.inf
+        prev_t[2::9] = 0
+    want = reference_coords(rays, BOX, "end_point", length=2.5, prev_t=prev_t, prev_scale=0.7)
+    for k in range(6):
+        got = quantised("end_point", rays, BOX, k, length=2.5, prev_t=prev_t, prev_scale=0.7)
+        assert np.abs(got - want[k]).max() <= 1, f"coordinate {k}"
+
+
+def test_termination_uses_prev_t_and_falls_back_to_two_point(rng):
+    rays = inside_rays(rng, 500)
+    two, term = TwoPointSorter(), TerminationSorter()
+    assert np.array_equal(term.keys(rays, BOX), two.keys(rays, BOX)), "no prev_t: two_point"
+    rays.prev_t = np.full(len(rays), np.nan, np.float32)
+    assert np.array_equal(term.keys(rays, BOX), two.keys(rays, BOX)), "all unknown: two_point"
+    rays.prev_t = rng.uniform(0.01, 0.5, len(rays)).astype(np.float32)
+    assert not np.array_equal(term.keys(rays, BOX), two.keys(rays, BOX))
+    rays.prev_t = np.zeros(3, np.float32)
+    with pytest.raises(ConfigError, match="prev_t"):
+        term.keys(rays, BOX)
+
+
+# -- order and sub-packets -----------------------------------------------------------
+
+def reference_order(keys, packets, digits):
+    """Stable sort by (large packet, top ``digits`` bytes of the key)."""
+    top = keys >> np.uint64(64 - 8 * digits) if digits < 8 else keys
+    label = np.repeat(np.arange(len(packets) - 1), np.diff(packets))
+    return np.lexsort((np.arange(len(keys)), top, label))
+
+
+def reference_offsets(keys_sorted, packets, packet_size, split_bits):
+    """Starts: each large packet's first ray, every packet_size-th ray of a run, and
+    every change of the key's top split_bits; plus the end."""
+    n = len(keys_sorted)
+    starts = set(int(p) for p in packets[:-1] if p < n)
+    top = (keys_sorted >> np.uint64(64 - split_bits)) if split_bits else np.zeros(n, np.uint64)
+    last = None
+    for i in range(n):
+        if i in starts or i - last == packet_size or (split_bits and top[i] != top[i - 1]):
+            starts.add(i)
+            last = i
+    return np.array(sorted(starts) + [n])
+
+
+@pytest.mark.parametrize("compress", [False, True])
+@pytest.mark.parametrize("digits,packet_size,split_bits", [(1, 64, 0), (3, 7, 5), (8, 4096, 0),
+                                                           (4, 64, 12)])
+def test_sort_keys_is_a_stable_sort(rng, compress, digits, packet_size, split_bits):
+    n = 3000
+    packets = np.array([0, 0, 5, 1029, 1029, 2500, 3000], np.int32)
+    keys = rng.integers(0, 2**63, size=n, dtype=np.uint64) << np.uint64(1)
+    keys[rng.random(n) < 0.4] = np.uint64(7) << np.uint64(60)   # long runs of one key
+    keys[1000:1400] = keys[1000]
+    order, offsets = _keysort.sort_keys(keys, packets, digits, compress=compress,
+                                        packet_size=packet_size, split_bits=split_bits)
+    assert np.array_equal(order, reference_order(keys, packets, digits))
+    assert np.array_equal(offsets, reference_offsets(keys[order], packets, packet_size,
+                                                     split_bits))
+
+
+@pytest.mark.parametrize("name", KEY_SORTERS)
+def test_sorter_orders_by_its_key(name, rng):
+    sorter = raysort.create("sorters", name)
+    rays = random_rays(rng, 2500, BOX)
+    packets = np.array([0, 1024, 2048, 2500], np.int32)
+    order, offsets = sorter.sort(rays, packets, BOX)
+    keys = sorter.keys(rays, BOX)
+    assert np.array_equal(order, reference_order(keys, packets, sorter._digits))
+
+
+@pytest.mark.parametrize("name", ["origin_direction", "two_point", "termination"])
+def test_octant_prefix(name, rng):
+    rays = random_rays(rng, 3000, BOX)
+    packets = np.array([0, 1024, 2048, 3000], np.int32)
+    order, offsets = raysort.create("sorters", name).sort(rays, packets, BOX)
+    d = rays.directions[:, order]
+    octant = (d[0] < 0) * 1 + (d[1] < 0) * 2 + (d[2] < 0) * 4
+    sizes = np.diff(offsets)
+    first = np.repeat(octant[offsets[:-1]], sizes)
+    assert np.array_equal(octant, first), "a sub-packet mixes octants"
+    plain = raysort.create("sorters", f"{name}:octant=False").sort(rays, packets, BOX)[0]
+    assert not np.array_equal(order, plain)
+
+
+def test_garanzha_compression_gives_the_plain_sort(rng):
+    rays = random_rays(rng, 2000, BOX)
+    rays.data[:, 100:600] = rays.data[:, 100:101]            # a long run of one ray
+    sorter = GaranzhaSorter(split=True)
+    keys = sorter.keys(rays, BOX)
+    packets = np.array([0, 1024, 2000], np.int32)
+    order, offsets = sorter.sort(rays, packets, BOX)
+    plain = _keysort.sort_keys(keys, packets, sorter._digits, compress=False,
+                               packet_size=64, split_bits=sorter.split_bits)
+    assert np.array_equal(order, plain[0]) and np.array_equal(offsets, plain[1])
+    ks = keys[order]
+    assert all(len(set(ks[a:b].tolist())) == 1 for a, b in zip(offsets[:-1], offsets[1:])), \
+        "split: a sub-packet holds two hashes"
+
+
+@pytest.mark.parametrize("layout", sorted(LAYOUTS))
+def test_layouts_build(layout, rng):
+    sorter = OriginDirectionSorter(layout=layout, bits=48)   # origin alone has 3 + 48 bits
+    rays = random_rays(rng, 500, BOX)
+    order, _ = sorter.sort(rays, np.array([0, 500], np.int32), BOX)
+    assert sorted(order.tolist()) == list(range(500))
+
+
+@pytest.mark.parametrize("spec,match", [
+    ("origin_direction:layout=spiral", "layout"),
+    ("origin_direction:lead=17", "lead"),
+    ("two_point:bits=0", "bits"),
+    ("two_point:bits=65", "bits"),
+    ("two_point:length=-1", "length"),
+    ("termination:scale=-1", "scale"),
+    ("garanzha:origin_bits=0", "origin_bits"),
+    ("garanzha:direction_bits=9", "direction_bits"),
+    ("origin_direction:split_bits=40,bits=32", "split_bits"),
+])
+def test_bad_parameters(spec, match):
+    with pytest.raises(ConfigError, match=match):
+        raysort.create("sorters", spec)
+
+
+def test_bad_packets_are_a_config_error(rng):
+    rays = random_rays(rng, 10, BOX)
+    with pytest.raises(ConfigError, match="packets"):
+        TwoPointSorter().sort(rays, np.array([0, 20], np.int32), BOX)
+
+
+# -- the previous hit distance ------------------------------------------------------
+
+def test_bounce_rays_carry_the_previous_hit_distance(sibenik):
+    """First-bounce rays start where their camera ray hit: |origin - camera| = prev_t |d|."""
+    from raysort.workloads import workload
+
+    work = workload(sibenik, "diffuse:depth=1", width=32, height=32, spp=1)
+    prev_t = work.rays.prev_t
+    assert prev_t is not None and len(prev_t) == len(work.rays)
+    assert np.isfinite(prev_t).all() and (prev_t > 0).all()
+    primary = workload(sibenik, "primary", width=32, height=32, spp=1)
+    assert primary.rays.prev_t is None
+    cam = primary.rays.origins[:, 0].astype(np.float64)
+    assert np.allclose(primary.rays.origins.T, cam), "the pinhole camera has one origin"
+    dir_len = np.linalg.norm(primary.rays.directions.astype(np.float64), axis=0)
+    assert np.allclose(dir_len, 1, atol=1e-6), "pinhole directions are unit vectors"
+    # each bounce ray starts at its camera ray's hit: camera + t * d (up to the small
+    # offset a shader adds to leave the surface)
+    dist = np.linalg.norm(work.rays.origins.T.astype(np.float64) - cam, axis=1)
+    extent = float(np.linalg.norm(sibenik.bvh().bounds[1] - sibenik.bvh().bounds[0]))
+    assert np.abs(dist - prev_t).max() <= 1e-3 * extent
