@@ -22,7 +22,8 @@ from raysort.registry import parse_spec
 
 BUILTINS = {
     "generators": {"pinhole"},
-    "sorters": {"none", "nah", "nah_numpy"},
+    "sorters": {"none", "nah", "nah_numpy", "origin_direction", "two_point", "termination",
+                "garanzha"},
     "traversals": {"single", "masked", "ranged", "partition", "wide"},
     "shaders": {"lambert", "ao"},
 }
