@@ -186,7 +186,7 @@ def dask_client(scheduler):
 # --------------------------------------------------------------------------
 
 def cmd_plugins(args):
-    from raysort import cpu
+    from raysort import isa
     from raysort.registry import list_plugins
 
     infos = list_plugins(load=True)
@@ -195,9 +195,9 @@ def cmd_plugins(args):
     widths = [max(len(r[k]) for r in rows) for k in range(4)]
     for r in rows:
         print("  ".join(c.ljust(w) for c, w in zip(r, widths)) + "  " + r[4])
-    simd = cpu.info()
-    print(f"\nSIMD: compiled {simd['compiled']}, active {simd['active']}; CPU "
-          f"({simd['machine']}) supports: {', '.join(simd['cpu_features']) or 'none detected'}")
+    info = isa.info()
+    print(f"\nISA: active {info['active']}; compiled {', '.join(info['compiled'])}; this CPU "
+          f"({info['machine']}) runs {', '.join(info['supported'])} (RAYSORT_ISA forces one)")
     return 0
 
 
@@ -288,6 +288,8 @@ def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        from raysort import isa
+        isa.active()            # a bad RAYSORT_ISA is reported here, in one line
         return args.func(args)
     except RaysortError as exc:
         print(f"raysort: error: {exc}", file=sys.stderr)

@@ -353,7 +353,7 @@ def test_json_may_not_overwrite_the_image(json_name, tmp_path, capsys, monkeypat
 
 def test_plugins_lists_every_builtin(capsys):
     """`raysort plugins` lists each built-in with distribution raysort, status ok,
-    and ends with the SIMD line."""
+    and ends with the ISA line (the active ISA and every compiled one)."""
     raysort.refresh()
     code, out, err = run(capsys, "plugins")
     assert code == 0 and err == ""
@@ -364,8 +364,10 @@ def test_plugins_lists_every_builtin(capsys):
     assert BUILTINS <= set(rows)
     for key in BUILTINS:
         assert rows[key][2] == "raysort" and rows[key][4] == "ok", rows[key]
-    simd = [line for line in lines if line.startswith("SIMD:")]
-    assert len(simd) == 1 and "compiled" in simd[0] and "active" in simd[0]
+    from raysort import isa
+    line = [line for line in lines if line.startswith("ISA:")]
+    assert len(line) == 1 and f"active {isa.active()};" in line[0]
+    assert f"compiled {', '.join(isa.compiled())};" in line[0]
 
 
 def test_scenes_lists_packaged_scenes(capsys):
