@@ -7,7 +7,7 @@ direction on the way (``rs_gather4`` in simd.h).
 """
 from libc.stdint cimport int32_t
 from libc.math cimport INFINITY
-from raysort._types cimport rs_gather4
+from raysort._types cimport rs_gather4, rs_isa_name
 
 
 def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1] offsets,
@@ -71,3 +71,8 @@ def scatter_occluded(const int32_t[::1] prim, const int32_t[::1] index, unsigned
         for s in range(index.shape[0]):
             if index[s] >= 0:
                 out[index[s]] = prim[s] >= 0
+
+
+def compiled_isa():
+    """The ISA this build of the kernels was compiled for (see raysort.isa)."""
+    return rs_isa_name().decode()

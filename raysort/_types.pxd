@@ -62,7 +62,7 @@ cdef extern from "raysort/types.h" nogil:
 
 
 cdef extern from "raysort/simd.h" nogil:
-    const char *rs_simd_name()
+    const char *rs_isa_name()
     void rs_prefetch(const void *p)
     float rs_minf(float a, float b)
     float rs_maxf(float a, float b)

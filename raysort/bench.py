@@ -111,12 +111,13 @@ def machine_info():
                     break
     except OSError:
         pass
-    from raysort import cpu as cpu_mod
+    from raysort import isa
     import raysort
 
     return {"cpu": cpu, "cores": os.cpu_count(), "machine": platform.machine(),
             "python": platform.python_version(), "numpy": np.__version__,
-            "raysort": raysort.__version__, "simd": cpu_mod.info()["compiled"],
+            "raysort": raysort.__version__, "isa": isa.active(),
+            "isas_compiled": isa.compiled(),
             "platform": platform.platform()}
 
 
@@ -189,8 +190,8 @@ def format_report(report, stream=None):
     print(f"raysort bench: {s['width']}x{s['height']}, {s['spp']} spp, depth {s['depth']}, "
           f"no shadow rays, seed {s['seed']}, {s['threads']} thread(s), best of "
           f"{s['repeat']}", file=stream)
-    print(f"machine: {m['cpu']} ({m['cores']} cores), SIMD {m['simd']}, Python {m['python']}",
-          file=stream)
+    print(f"machine: {m['cpu']} ({m['cores']} cores), ISA {m['isa']} (compiled "
+          f"{', '.join(m['isas_compiled'])}), Python {m['python']}", file=stream)
     for name, scene in report["scenes"].items():
         rows = scene["configs"]
         print(f"\n{name} ({scene['triangles']:,} triangles)", file=stream)

@@ -82,14 +82,27 @@ def _aov_names(text):
 # render
 # --------------------------------------------------------------------------
 
+# Shader-spec shorthands: a flag sets a shader parameter of this name, for any shader
+# that declares it (`--depth 3` is `--shader NAME:max_depth=3`).
+SHADER_SHORTHANDS = (("depth", "--depth", "max_depth"),
+                     ("shadow_rays", "--shadow-rays", "shadow_rays"))
+
+
 def _shader_config(args):
-    from raysort.registry import parse_spec
+    from raysort.registry import load, parse_spec
 
     config = parse_spec(args.shader)
-    if args.depth is not None:
-        config["max_depth"] = args.depth
-    if args.shadow_rays is not None:
-        config["shadow_rays"] = args.shadow_rays == "on"
+    given = [(flag, param, getattr(args, attr)) for attr, flag, param in SHADER_SHORTHANDS
+             if getattr(args, attr) is not None]
+    if given:
+        accepted = load("shaders", config["type"]).parameter_names()
+    for flag, param, value in given:
+        if param not in accepted:
+            raise ConfigError(
+                f"{flag} sets the shader parameter {param!r}, which shader "
+                f"{config['type']!r} does not declare (it takes: "
+                f"{', '.join(accepted) or 'no parameters'})")
+        config[param] = (value == "on") if param == "shadow_rays" else value
     return config
 
 
@@ -186,7 +199,7 @@ def dask_client(scheduler):
 # --------------------------------------------------------------------------
 
 def cmd_plugins(args):
-    from raysort import cpu
+    from raysort import isa
     from raysort.registry import list_plugins
 
     infos = list_plugins(load=True)
@@ -195,9 +208,9 @@ def cmd_plugins(args):
     widths = [max(len(r[k]) for r in rows) for k in range(4)]
     for r in rows:
         print("  ".join(c.ljust(w) for c, w in zip(r, widths)) + "  " + r[4])
-    simd = cpu.info()
-    print(f"\nSIMD: compiled {simd['compiled']}, active {simd['active']}; CPU "
-          f"({simd['machine']}) supports: {', '.join(simd['cpu_features']) or 'none detected'}")
+    info = isa.info()
+    print(f"\nISA: active {info['active']}; compiled {', '.join(info['compiled'])}; this CPU "
+          f"({info['machine']}) runs {', '.join(info['supported'])} (RAYSORT_ISA forces one)")
     return 0
 
 
@@ -247,14 +260,15 @@ def build_parser():
     r.add_argument("--size", type=_size, default=(320, 240), help="WIDTHxHEIGHT (320x240)")
     r.add_argument("--spp", type=_positive, default=4, help="samples per pixel (4)")
     r.add_argument("--depth", type=_non_negative, default=None,
-                   help="diffuse bounces after the primary hit (shader default: 2)")
+                   help="bounces after the primary hit: sets the shader's max_depth (lambert's default: 2)")
     r.add_argument("--seed", type=_seed, default=0, help="random seed, 0..2**32-1 (0)")
     r.add_argument("--sorter", default="nah", help="sorter name or name:key=value,... (nah)")
     r.add_argument("--traversal", default="wide", help="traversal name or spec (wide)")
     r.add_argument("--generator", default="pinhole", help="generator name or spec (pinhole)")
     r.add_argument("--shader", default="lambert", help="shader name or spec (lambert)")
     r.add_argument("--shadow-rays", choices=("on", "off"), default=None,
-                   help="shadow rays to the scene's point lights (default: on if it has any)")
+                   help="shadow rays to the scene's point lights: sets the shader's shadow_rays "
+                        "(lambert's default: on if the scene has lights)")
     r.add_argument("--threads", type=_positive, default=_usable_cores(),
                    help="worker threads (default: the usable cores, %(default)s here)")
     r.add_argument("--scheduler", default=None, metavar="ADDRESS", help=SCHEDULER_HELP)
@@ -288,6 +302,8 @@ def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        from raysort import isa
+        isa.active()            # a bad RAYSORT_ISA is reported here, in one line
         return args.func(args)
     except RaysortError as exc:
         print(f"raysort: error: {exc}", file=sys.stderr)

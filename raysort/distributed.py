@@ -331,15 +331,15 @@ MAX_SCENES, MAX_PIPELINES = 4, 32
 
 
 def worker_info():
-    """Where a task runs: Dask worker address, host name and the active SIMD path."""
-    from raysort import cpu
+    """Where a task runs: Dask worker address, host name and the active ISA."""
+    from raysort import isa
 
     try:
         from distributed import get_worker
         address = get_worker().address
     except (ImportError, ValueError):
         address = "(not on a Dask worker)"
-    return {"worker": address, "host": socket.gethostname(), "isa": cpu.info()["active"]}
+    return {"worker": address, "host": socket.gethostname(), "isa": isa.active()}
 
 
 def worker_pipeline(scene, key, recipe):

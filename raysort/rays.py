@@ -24,7 +24,7 @@ import numbers
 
 import numpy as np
 
-from raysort import _gather
+from raysort import isa
 from raysort.errors import ConfigError
 
 __all__ = ["RayBatch", "Packets", "Hits", "aligned_empty", "gather", "scatter", "scatter_occluded"]
@@ -249,7 +249,7 @@ def gather(rays, order, offsets):
     """
     counts = np.diff(np.asarray(offsets, dtype=np.int32))
     packets = Packets(counts)
-    _gather.gather(rays.data, np.ascontiguousarray(order, dtype=np.int32),
+    isa.module("_gather").gather(rays.data, np.ascontiguousarray(order, dtype=np.int32),
                    np.ascontiguousarray(offsets, dtype=np.int32), packets.starts,
                    packets.rows, packets.prim, packets.u, packets.v, packets.index)
     return packets
@@ -258,7 +258,7 @@ def gather(rays, order, offsets):
 def scatter(packets, n, hits=None):
     """Copy the closest hits of ``packets`` back to batch order (a new or given :class:`Hits`)."""
     hits = Hits(n) if hits is None else hits
-    _gather.scatter(packets.rows, packets.prim, packets.u, packets.v, packets.index,
+    isa.module("_gather").scatter(packets.rows, packets.prim, packets.u, packets.v, packets.index,
                     hits.t, hits.prim, hits.u, hits.v)
     return hits
 
@@ -266,5 +266,5 @@ def scatter(packets, n, hits=None):
 def scatter_occluded(packets, n):
     """For an any-hit query: a bool array, True where the ray found any hit."""
     occluded = np.zeros(n, dtype=np.uint8)
-    _gather.scatter_occluded(packets.prim, packets.index, occluded)
+    isa.module("_gather").scatter_occluded(packets.prim, packets.index, occluded)
     return occluded.view(bool)

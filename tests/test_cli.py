@@ -353,7 +353,7 @@ def test_json_may_not_overwrite_the_image(json_name, tmp_path, capsys, monkeypat
 
 def test_plugins_lists_every_builtin(capsys):
     """`raysort plugins` lists each built-in with distribution raysort, status ok,
-    and ends with the SIMD line."""
+    and ends with the ISA line (the active ISA and every compiled one)."""
     raysort.refresh()
     code, out, err = run(capsys, "plugins")
     assert code == 0 and err == ""
@@ -364,8 +364,10 @@ def test_plugins_lists_every_builtin(capsys):
     assert BUILTINS <= set(rows)
     for key in BUILTINS:
         assert rows[key][2] == "raysort" and rows[key][4] == "ok", rows[key]
-    simd = [line for line in lines if line.startswith("SIMD:")]
-    assert len(simd) == 1 and "compiled" in simd[0] and "active" in simd[0]
+    from raysort import isa
+    line = [line for line in lines if line.startswith("ISA:")]
+    assert len(line) == 1 and f"active {isa.active()};" in line[0]
+    assert f"compiled {', '.join(isa.compiled())};" in line[0]
 
 
 def test_scenes_lists_packaged_scenes(capsys):
@@ -422,3 +424,39 @@ def test_unwritable_target_fails_before_rendering(capsys, monkeypatch):
     code, out, err = run(capsys, "render", "plane", *TINY, "-o", "/proc/out.exr")
     assert code == 2 and out == ""
     assert_one_line_error(err, "/proc/out.exr", "cannot create a file in '/proc'")
+
+
+class _DepthOnly(raysort.Shader):
+    """A shader declaring `max_depth` but not `shadow_rays`, to test the shorthands."""
+
+    def __init__(self, *, max_depth=1):
+        self.max_depth = max_depth
+
+    def shade(self, scene, rays, hits, paths, depth, seed, radiance):
+        return None
+
+
+def test_depth_shorthand_sets_max_depth_of_any_shader_declaring_it(monkeypatch):
+    from raysort.cli import _shader_config, build_parser
+
+    raysort.register("shaders", "depth_only", _DepthOnly)
+    try:
+        args = build_parser().parse_args(["render", "--shader", "depth_only", "--depth", "3"])
+        assert _shader_config(args) == {"type": "depth_only", "max_depth": 3}
+        args = build_parser().parse_args(["render", "--shader", "depth_only",
+                                          "--shadow-rays", "off"])
+        with pytest.raises(raysort.ConfigError, match="--shadow-rays sets the shader "
+                                                      "parameter 'shadow_rays'.*depth_only"):
+            _shader_config(args)
+    finally:
+        raysort.unregister("shaders", "depth_only")
+
+
+@pytest.mark.parametrize("flag", [["--depth", "2"], ["--shadow-rays", "on"]])
+def test_shorthand_for_a_shader_without_the_parameter_is_one_line(tmp_path, capsys, flag):
+    code, out, err = run(capsys, "render", "plane", *TINY, "--shader", "ao", *flag,
+                         "-o", tmp_path / "x.exr")
+    assert code == 2 and out == ""
+    assert err.startswith(f"raysort: error: {flag[0]} sets the shader parameter")
+    assert "'ao' does not declare" in err and len(err.strip().splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []

@@ -21,6 +21,7 @@ from raysort._types cimport rs_minf, rs_maxf
 
 import numpy as np
 
+from raysort import isa
 from raysort.sdk import MAX_PACKET, ConfigError, Sorter, fixed_packets, integer, number
 
 DEF BUCKETS = 24
@@ -198,7 +199,7 @@ class NahSorter(Sorter):
         n = len(rays)
         order = np.empty(max(n, 1), dtype=np.int32)
         offsets = np.empty(n + 1, dtype=np.int32)
-        n_sub = _sort(rays.data, packets, extent, self.threshold,
+        n_sub = isa.module("sorters.nah")._sort(rays.data, packets, extent, self.threshold,
                       self.max_cells.bit_length() - 1, self.packet_size, order, offsets,
                       bucket, cell)
         return order[:n], offsets[:n_sub + 1].copy()

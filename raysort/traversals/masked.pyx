@@ -9,6 +9,7 @@ from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box4, rs_tri4, rs_
 from raysort.traversals._common cimport (Geometry, Scratch, run, stack_root, stack_pop,
                                          push_children, lowest_bit, left_first)
 
+from raysort import isa
 from raysort.plugin import Traversal
 
 
@@ -54,6 +55,10 @@ cdef void trace_masked(const Geometry *g, rs_rays *r, int start, int count, int 
     counters[0] = c
 
 
+def trace(bvh, packets, bint any_hit):
+    """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa)."""
+    return run(trace_masked, bvh, packets, any_hit)
+
 
 class MaskedTraversal(Traversal):
     """Masked packet traversal (Wald et al. 2001), all SIMD.
@@ -68,4 +73,4 @@ class MaskedTraversal(Traversal):
     trusted = True
 
     def intersect(self, bvh, packets, any_hit=False):
-        return run(trace_masked, bvh, packets, any_hit)
+        return isa.module("traversals.masked").trace(bvh, packets, any_hit)

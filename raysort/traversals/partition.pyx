@@ -15,6 +15,7 @@ from raysort._types cimport (rs_node, rs_rays, rs_frustum, rs_counters, rs_box4,
 from raysort.traversals._common cimport (Geometry, Scratch, run, stack_root, stack_pop,
                                          push_children, lowest_bit, left_first, frustum_of)
 
+from raysort import isa
 from raysort.plugin import Traversal
 
 
@@ -68,6 +69,10 @@ cdef void trace_partition(const Geometry *g, rs_rays *r, int start, int count, i
     counters[0] = c
 
 
+def trace(bvh, packets, bint any_hit):
+    """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa)."""
+    return run(trace_partition, bvh, packets, any_hit)
+
 
 class PartitionTraversal(Traversal):
     """Partition traversal (Overbeck et al. 2008) over 4-ray groups, all SIMD.
@@ -83,4 +88,4 @@ class PartitionTraversal(Traversal):
     trusted = True
 
     def intersect(self, bvh, packets, any_hit=False):
-        return run(trace_partition, bvh, packets, any_hit)
+        return isa.module("traversals.partition").trace(bvh, packets, any_hit)

@@ -15,6 +15,7 @@ from raysort.traversals._common cimport (Geometry, Scratch, run, stack_root, sta
                                          lowest_bit, highest_bit, left_first, frustum_of,
                                          leaf_range)
 
+from raysort import isa
 from raysort.plugin import Traversal
 
 
@@ -117,6 +118,10 @@ cdef void trace_ranged(const Geometry *g, rs_rays *r, int start, int count, int 
     counters[0] = c
 
 
+def trace(bvh, packets, bint any_hit):
+    """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa)."""
+    return run(trace_ranged, bvh, packets, any_hit)
+
 
 class RangedTraversal(Traversal):
     """DynBVH ranged packet traversal, Manta's default (Wald et al. 2007).
@@ -133,4 +138,4 @@ class RangedTraversal(Traversal):
     trusted = True
 
     def intersect(self, bvh, packets, any_hit=False):
-        return run(trace_ranged, bvh, packets, any_hit)
+        return isa.module("traversals.ranged").trace(bvh, packets, any_hit)

@@ -4,6 +4,7 @@ from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box1, rs_tri1, rs_
 from raysort.traversals._common cimport (Geometry, Scratch, run, active, left_first,
                                          prefetch_leaf, leaf_ray)
 
+from raysort import isa
 from raysort.plugin import Traversal
 
 
@@ -43,6 +44,10 @@ cdef void trace_single(const Geometry *g, rs_rays *r, int start, int count, int 
     counters[0] = c
 
 
+def trace(bvh, packets, bint any_hit):
+    """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa)."""
+    return run(trace_single, bvh, packets, any_hit)
+
 
 class SingleTraversal(Traversal):
     """Scalar depth-first traversal of one ray at a time.
@@ -58,4 +63,4 @@ class SingleTraversal(Traversal):
     trusted = True
 
     def intersect(self, bvh, packets, any_hit=False):
-        return run(trace_single, bvh, packets, any_hit)
+        return isa.module("traversals.single").trace(bvh, packets, any_hit)

@@ -14,6 +14,7 @@ from raysort._types cimport (rs_node4, rs_rays, rs_counters, rs_tri1, rs_node4_h
                              rs_prefetch, RS_BOX_SLACK)
 from raysort.traversals._common cimport Geometry, Scratch, run, active, leaf_ray
 
+from raysort import isa
 from raysort.plugin import Traversal
 
 
@@ -82,6 +83,11 @@ cdef void trace_wide(const Geometry *g, rs_rays *r, int start, int count, int an
     counters[0] = c
 
 
+def trace(bvh, packets, bint any_hit):
+    """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa)."""
+    return run(trace_wide, bvh, packets, any_hit, True)
+
+
 class WideTraversal(Traversal):
     """One ray at a time through a 4-wide BVH, four child boxes per SIMD test.
 
@@ -96,4 +102,4 @@ class WideTraversal(Traversal):
     trusted = True
 
     def intersect(self, bvh, packets, any_hit=False):
-        return run(trace_wide, bvh, packets, any_hit, True)
+        return isa.module("traversals.wide").trace(bvh, packets, any_hit)

@@ -22,7 +22,7 @@ import trimesh
 from trimesh.ray.ray_pyembree import RayMeshIntersector as EmbreeIntersector
 
 import raysort
-from raysort import cpu
+from raysort import isa
 from raysort.trimesh import RayMeshIntersector
 
 QUERIES = {
@@ -60,11 +60,10 @@ def main():
     for name in backends:
         agree = np.mean(first[name] == first["embree"])
         print(f"{name}: first hits agree with embree on {agree:.2%} of 1000 rays")
-    simd = cpu.info()
     print(f"scene {args.scene} ({len(scene.faces):,} triangles), {args.rays:,} rays, "
           f"{args.rounds} rounds, raysort threads {args.threads}; CPU "
           f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, raysort "
-          f"SIMD {simd['active']}")
+          f"ISA {isa.active()}")
     for query in args.queries.split(","):
         call = QUERIES[query]
         seconds = {name: [] for name in backends}

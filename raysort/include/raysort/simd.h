@@ -2,9 +2,10 @@
  *
  * This is the only file that includes compiler intrinsics.  It provides
  *   - a 4-lane float/mask vocabulary (rs_v4f, rs_v4m) with an SSE2 path and a
- *     portable scalar path, chosen at build time: RAYSORT_NO_SIMD=1 in the
- *     environment of `pip install` defines RAYSORT_NO_SIMD, and non-x86
- *     machines get the scalar path automatically;
+ *     portable scalar path, chosen at build time: setup.py defines
+ *     RAYSORT_NO_SIMD for the "scalar" ISA build, and non-x86 machines get the
+ *     scalar path automatically; the avx2 and avx512 builds compile the SSE2
+ *     path with VEX/EVEX encoding and may add wider code (RS_ISA_AVX2, ...);
  *   - the numeric kernels every traversal shares: slab tests of one ray or 4
  *     rays against a box, Moller-Trumbore tests of one ray or 4 rays against a
  *     triangle, the interval-arithmetic (frustum) box test, and the 4-ray
@@ -27,10 +28,32 @@
 #if !defined(RAYSORT_NO_SIMD) && (defined(__SSE2__) || defined(_M_X64))
 #  define RS_SSE 1
 #  include <emmintrin.h>
-#  define RS_SIMD_NAME "sse2"
 #else
 #  define RS_SSE 0
-#  define RS_SIMD_NAME "scalar"
+#endif
+
+/* The ISA this translation unit is compiled for (setup.py builds each kernel module
+ * once per ISA, see raysort/isa.py): RS_ISA_AVX512 implies RS_ISA_AVX2.  Wider code
+ * paths test these; they must perform the same IEEE operations per lane. */
+#if RS_SSE && defined(__AVX2__)
+#  define RS_ISA_AVX2 1
+#  include <immintrin.h>
+#else
+#  define RS_ISA_AVX2 0
+#endif
+#if RS_ISA_AVX2 && defined(__AVX512F__) && defined(__AVX512VL__) && defined(__AVX512BW__) \
+    && defined(__AVX512DQ__)
+#  define RS_ISA_AVX512 1
+#  define RS_ISA_NAME "avx512"
+#elif RS_ISA_AVX2
+#  define RS_ISA_AVX512 0
+#  define RS_ISA_NAME "avx2"
+#elif RS_SSE
+#  define RS_ISA_AVX512 0
+#  define RS_ISA_NAME "sse2"
+#else
+#  define RS_ISA_AVX512 0
+#  define RS_ISA_NAME "scalar"
 #endif
 
 #if defined(_MSC_VER)
@@ -54,7 +77,7 @@
 
 RS_INLINE float rs_minf(float a, float b) { return a < b ? a : b; }
 RS_INLINE float rs_maxf(float a, float b) { return a > b ? a : b; }
-RS_INLINE const char *rs_simd_name(void) { return RS_SIMD_NAME; }
+RS_INLINE const char *rs_isa_name(void) { return RS_ISA_NAME; }
 
 /* ------------------------------------------------------------------------ */
 /* 4-lane vocabulary                                                         */

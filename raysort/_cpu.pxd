@@ -1,1 +1,0 @@
-"""CPU feature detection; see _cpu.pyx."""
