@@ -32,6 +32,7 @@ INCLUDE = "raysort/include"
 ISA_MODULES = [
     "_gather",
     "sorters.nah",
+    "sorters._keysort",
     "traversals.single",
     "traversals.masked",
     "traversals.ranged",

@@ -1,7 +1,8 @@
 """The machinery of the sort-key sorters: per-ray keys, a radix sort, sub-packet cuts.
 
 Shared by ``origin_direction``, ``two_point``, ``termination`` and ``garanzha``
-(see those modules for the keys and their papers).  A key is built in one pass
+(see those modules for the keys and their papers); built per ISA and called
+through :func:`raysort.isa.module` like every kernel.  A key is built in one pass
 over the rays:
 
 1. every ray gives up to six coordinates in [0, 1] (``coordinates`` below):
@@ -35,6 +36,7 @@ from raysort._types cimport rs_maxf, rs_minf
 
 import numpy as np
 
+from raysort import isa
 from raysort.sdk import MAX_PACKET, ConfigError, Sorter, boolean, check_packets, integer
 
 #: bits each coordinate is quantised to (a key table has two byte-tables per coordinate)
@@ -369,14 +371,16 @@ class KeySorter(Sorter):
     def keys(self, rays, bounds):
         """The uint64 key of every ray (left aligned, ``bits`` significant bits)."""
         length, prev_t, prev_scale = self.end_length(rays, bounds)
-        return make_keys(rays, self.coordinates, bounds, self._table, length=length,
-                         prev_t=prev_t, prev_scale=prev_scale, octant=self.octant)
+        return isa.module("sorters._keysort").make_keys(
+            rays, self.coordinates, bounds, self._table, length=length, prev_t=prev_t,
+            prev_scale=prev_scale, octant=self.octant)
 
     def sort(self, rays, packets, bounds):
         packets = check_packets(packets, len(rays))
         bounds = np.asarray(bounds, dtype=np.float32).reshape(2, 3)
-        return sort_keys(self.keys(rays, bounds), packets, self._digits, compress=self.compress,
-                         packet_size=self.packet_size, split_bits=self._split)
+        return isa.module("sorters._keysort").sort_keys(
+            self.keys(rays, bounds), packets, self._digits, compress=self.compress,
+            packet_size=self.packet_size, split_bits=self._split)
 
 
 def _truncate(levels, bits):
