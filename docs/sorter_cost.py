@@ -5,6 +5,7 @@ Usage (from any directory, with raysort installed)::
     python docs/sorter_cost.py                                # all sorters, ranged + wide
     python docs/sorter_cost.py --scenes sibenik --rounds 11 --json cost.json
     python docs/sorter_cost.py --sorters two_point two_point:octant=False garanzha:split=True
+    python docs/sorter_cost.py --report docs/sorter-cost.json     # print saved results
 
 For each scene, the first-bounce diffuse rays of a render (``workload(scene,
 "diffuse:depth=1")``, 256x256 at 1 spp by default, in the large packets the render
@@ -126,25 +127,34 @@ def fmt_ratio(r, pct=False):
     return f"{r[0]:.3f} [{r[1]:.3f}, {r[2]:.3f}]"
 
 
-def print_table(scene, work, rows, out=sys.stdout):
-    print(f"\n### {scene}: {len(work.rays)} first-bounce diffuse rays, "
-          f"{len(work.packets) - 1} large packets\n", file=out)
+def print_header(info, args, out=sys.stdout):
+    print(f"CPU: {info['cpu']}; raysort ISA: {info['isa']}; one thread; "
+          f"{args['rounds']} interleaved rounds; {args.get('clock', 'cpu')} time; "
+          f"medians [min, max]", file=out)
+
+
+def print_table(scene, rays, packets, rows, out=sys.stdout):
+    print(f"\n### {scene}: {rays} first-bounce diffuse rays, {packets} large packets\n",
+          file=out)
     print("| traversal | sorter | sort ms | gather ms | trace ms [min, max] | "
           "(sort+gather)/trace | trace speed-up vs none | vs nah | total speed-up vs nah | "
-          "N_IA | N_B | N_T |", file=out)
+          "N_IA | N_B scalar + SIMD | N_T scalar + SIMD |", file=out)
     print("|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
     for r in rows:
         c = r["counters"]
-        nb = (c["box1"] or 0) + (c["box4"] or 0) if c["box1"] is not None else float("nan")
-        nt = (c["tri1"] or 0) + (c["tri4"] or 0) if c["tri1"] is not None else float("nan")
-        ia = c["ia"] if c["ia"] is not None else float("nan")
+        if c["box1"] is None:                     # a traversal that cannot count
+            ia = nb = nt = "n/a"
+        else:
+            ia = f"{c['ia']:.2f}"
+            nb = f"{c['box1']:.1f} + {c['box4']:.1f}"
+            nt = f"{c['tri1']:.1f} + {c['tri4']:.1f}"
         print(f"| {r['traversal']} | {r['sorter']} | {r['sort_ms']:.2f} | {r['gather_ms']:.2f} | "
               f"{r['trace_ms']:.1f} [{r['trace_ms_range'][0]:.1f}, "
               f"{r['trace_ms_range'][1]:.1f}] | {fmt_ratio(r['cost_share'], pct=True)} | "
               f"{fmt_ratio(r.get('trace_speedup_vs_none', (float('nan'),) * 3))} | "
               f"{fmt_ratio(r.get('trace_speedup_vs_nah', (float('nan'),) * 3))} | "
               f"{fmt_ratio(r.get('total_speedup_vs_nah', (float('nan'),) * 3))} | "
-              f"{ia:.2f} | {nb:.1f} | {nt:.1f} |", file=out)
+              f"{ia} | {nb} | {nt} |", file=out)
 
 
 def main(argv=None):
@@ -161,7 +171,16 @@ def main(argv=None):
                     help="cpu: this thread's CPU time (robust on a loaded machine, the "
                          "default); wall: perf_counter")
     ap.add_argument("--json", help="also write the results here")
+    ap.add_argument("--report", metavar="JSON", help="print the tables of a saved --json "
+                    "file instead of measuring")
     args = ap.parse_args(argv)
+    if args.report:
+        with open(args.report, encoding="utf-8") as fh:
+            report = json.load(fh)
+        print_header(report["machine"], report["args"])
+        for scene, res in report["scenes"].items():
+            print_table(scene, res["rays"], res["packets"], res["rows"])
+        return
     sorters = []
     for spec in ["none", "nah"] + args.sorters:
         for name in raysort.available("sorters") if spec == "all" else [spec]:
@@ -169,16 +188,16 @@ def main(argv=None):
                 sorters.append(name)
     traversals = args.traversals.split(",")
     info = machine()
-    print(f"CPU: {info['cpu']}; raysort ISA: {info['isa']}; one thread; "
-          f"{args.rounds} interleaved rounds; {args.clock} time; medians [min, max]")
+    print_header(info, vars(args))
     report = {"machine": info, "args": vars(args), "scenes": {}}
     for scene in args.scenes.split(","):
         work, times, counters = measure(scene, sorters, traversals, args.rounds, args.size,
                                         args.depth, CLOCKS[args.clock])
         rows = summarise(times, counters, sorters, traversals)
-        print_table(scene, work, rows)
+        print_table(scene, len(work.rays), len(work.packets) - 1, rows)
         sys.stdout.flush()
-        report["scenes"][scene] = {"rays": len(work.rays), "rows": rows, "times": {
+        report["scenes"][scene] = {"rays": len(work.rays), "packets": len(work.packets) - 1,
+                                   "rows": rows, "times": {
             f"{t}/{s}": v for (t, s), v in times.items()}}
     if args.json:
         with open(args.json, "w", encoding="utf-8") as fh:
