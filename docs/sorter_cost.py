@@ -201,7 +201,7 @@ def main(argv=None):
             f"{t}/{s}": v for (t, s), v in times.items()}}
     if args.json:
         with open(args.json, "w", encoding="utf-8") as fh:
-            json.dump(report, fh, indent=1)
+            json.dump(report, fh, separators=(",", ":"))
 
 
 if __name__ == "__main__":

@@ -291,3 +291,28 @@ def test_bounce_rays_carry_the_previous_hit_distance(sibenik):
     dist = np.linalg.norm(work.rays.origins.T.astype(np.float64) - cam, axis=1)
     extent = float(np.linalg.norm(sibenik.bvh().bounds[1] - sibenik.bvh().bounds[0]))
     assert np.abs(dist - prev_t).max() <= 1e-3 * extent
+
+
+# -- every ISA ---------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", KEY_SORTERS)
+def test_same_order_on_every_isa(name, rng):
+    """The key kernel is built per ISA; every build gives the same keys and order."""
+    from raysort import isa
+
+    rays = inside_rays(rng, 3000)
+    rays.prev_t = rng.uniform(0, 3, len(rays)).astype(np.float32)
+    packets = np.array([0, 1024, 2048, 3000], np.int32)
+    sorter = raysort.create("sorters", name)
+    results = {}
+    for each in isa.available():
+        previous = isa.use(each)
+        try:
+            assert isa.module("sorters._keysort").__name__.startswith(
+                "raysort.sorters" if each == isa.baseline() else f"raysort._isa.{each}.")
+            results[each] = sorter.keys(rays, BOX), *sorter.sort(rays, packets, BOX)
+        finally:
+            isa.use(previous)
+    first = next(iter(results.values()))
+    for each, got in results.items():
+        assert all(np.array_equal(a, b) for a, b in zip(got, first)), each
