@@ -11,7 +11,7 @@ all.
 from libc.stdlib cimport malloc, free, qsort
 from libc.stdint cimport int32_t
 from libc.math cimport INFINITY
-from raysort._types cimport rs_node, rs_node4, rs_tri, rs_minf, rs_maxf
+from raysort._types cimport rs_node, rs_node4, rs_node8, rs_tri, rs_tri8, rs_minf, rs_maxf
 
 import numpy as np
 
@@ -401,3 +401,203 @@ def refit(const float[:, ::1] vertices, const int32_t[:, ::1] faces, const int32
     with nogil:
         prepare_triangles(vertices, faces, &order[0], n, <rs_tri *> &tri_bytes[0])
         refit_nodes(<rs_node *> &node_bytes[0], n_nodes, vertices, faces, &order[0])
+
+
+cdef inline int groups_of(int n_tris) noexcept nogil:
+    """rs_tri8 groups needed for a leaf of ``n_tris`` triangles."""
+    return (n_tris + 7) // 8
+
+
+cdef enum:
+    WIDTH8 = 8      # children of an rs_node8, lanes of an rs_tri8
+    SLOTS = 9       # DP entries per binary node: slots 1..8 (index 0 unused)
+    AS_LEAF = 1     # choice[n][1]: the subtree becomes one leaf
+    AS_NODE = 2     # choice[n][1]: the subtree becomes one rs_node8
+
+
+cdef int collect_slots(const rs_node *nodes, const unsigned char *choice, int b, int i,
+                       int *kids, int m) noexcept nogil:
+    """Append to kids[m...] the binary nodes that the DP's best cover of subtree ``b``
+    with at most ``i`` slots uses; returns the new count."""
+    while i > 1 and choice[SLOTS * b + i] == 0:
+        i -= 1
+    if i == 1:
+        kids[m] = b
+        return m + 1
+    cdef int k = choice[SLOTS * b + i]
+    m = collect_slots(nodes, choice, b + 1, k, kids, m)
+    return collect_slots(nodes, choice, nodes[b].offset, i - k, kids, m)
+
+
+cdef void pack_group(const rs_tri *tris, int first, int count, rs_tri8 *g) noexcept nogil:
+    """Triangles [first, first + count) (count <= 8) into one SoA group; unused lanes
+    get zero edges (never hit) and id INT32_MAX."""
+    cdef int k, a
+    for k in range(WIDTH8):
+        for a in range(3):
+            g.v0[a][k] = tris[first + k].v0[a] if k < count else 0
+            g.e1[a][k] = tris[first + k].e1[a] if k < count else 0
+            g.e2[a][k] = tris[first + k].e2[a] if k < count else 0
+        g.id[k] = tris[first + k].id if k < count else 2147483647
+
+
+cdef int collapse8_nodes(const rs_node *nodes, int n_nodes, const rs_tri *tris,
+                         double node_cost, double group_cost, int max_leaf,
+                         rs_node8 *out, rs_tri8 *groups, int *n_groups, int *depth,
+                         double *sah) except -1 nogil:
+    """Collapse the binary BVH into 8-wide nodes by SAH-optimal dynamic programming.
+
+    The DP of Ylitie et al. 2017: cost[b][i] is the least SAH cost of covering
+    binary subtree ``b`` with at most ``i`` children of the parent 8-wide node;
+    one slot holds either a leaf (``group_cost`` per rs_tri8 group, allowed up to
+    ``max_leaf`` triangles; binary leaves always) or an 8-wide node
+    (``node_cost`` plus the best cover of its subtree with 8 slots), each
+    weighted by its surface area.  Leaves' triangles are packed into SoA groups
+    of 8.  ``out`` needs room for the binary inner nodes + 1, ``groups`` for
+    n_tris / 8 + binary leaves.  Returns the number of nodes written; ``sah``
+    gets the tree's cost relative to the root's area.
+    """
+    cdef double *area = <double *> malloc(n_nodes * sizeof(double))
+    cdef int *ntri = <int *> malloc(n_nodes * sizeof(int))
+    cdef double *cost = <double *> malloc(SLOTS * n_nodes * sizeof(double))
+    cdef unsigned char *choice = <unsigned char *> malloc(SLOTS * n_nodes)
+    cdef unsigned char *split8 = <unsigned char *> malloc(n_nodes)
+    cdef int *work = <int *> malloc(2 * (n_nodes + 1) * sizeof(int))
+    cdef int *level = NULL
+    cdef int b, i, j, k, a, L, R, best_k, sp, n_out, w, m, c, ng, first, kid
+    cdef int kids[WIDTH8]
+    cdef double dist[SLOTS]
+    cdef double leaf, inner, s, root_dist = 0
+    cdef rs_node8 *o
+    if (area == NULL or ntri == NULL or cost == NULL or choice == NULL or split8 == NULL
+            or work == NULL):
+        free(area); free(ntri); free(cost); free(choice); free(split8); free(work)
+        with gil:
+            raise MemoryError()
+    # bottom up (children follow their parent in the depth-first array)
+    for b in range(n_nodes - 1, -1, -1):
+        area[b] = (<double> nodes[b].hi[0] - nodes[b].lo[0]) * (<double> nodes[b].hi[1] - nodes[b].lo[1]) \
+            + (<double> nodes[b].hi[1] - nodes[b].lo[1]) * (<double> nodes[b].hi[2] - nodes[b].lo[2]) \
+            + (<double> nodes[b].hi[2] - nodes[b].lo[2]) * (<double> nodes[b].hi[0] - nodes[b].lo[0])
+        if area[b] < 0:
+            area[b] = 0
+        for i in range(SLOTS):
+            choice[SLOTS * b + i] = 0
+        if nodes[b].count:
+            ntri[b] = nodes[b].count
+            leaf = area[b] * group_cost * groups_of(ntri[b])
+            for i in range(1, SLOTS):
+                cost[SLOTS * b + i] = leaf
+            choice[SLOTS * b + 1] = AS_LEAF
+            continue
+        L = b + 1
+        R = nodes[b].offset
+        ntri[b] = ntri[L] + ntri[R]
+        best_k = 1
+        for j in range(2, SLOTS):
+            dist[j] = INFINITY
+            for k in range(1, j):
+                s = cost[SLOTS * L + k] + cost[SLOTS * R + j - k]
+                if s < dist[j]:
+                    dist[j] = s
+                    best_k = k
+            choice[SLOTS * b + j] = <unsigned char> best_k
+        split8[b] = <unsigned char> best_k     # the 8-slot cover below b (j == 8 last)
+        if b == 0:
+            root_dist = dist[WIDTH8]
+        inner = area[b] * node_cost + dist[WIDTH8]
+        leaf = area[b] * group_cost * groups_of(ntri[b]) if ntri[b] <= max_leaf else INFINITY
+        cost[SLOTS * b + 1] = leaf if leaf <= inner else inner
+        choice[SLOTS * b + 1] = AS_LEAF if leaf <= inner else AS_NODE
+        for j in range(2, SLOTS):
+            if dist[j] < cost[SLOTS * b + j - 1]:
+                cost[SLOTS * b + j] = dist[j]
+            else:
+                cost[SLOTS * b + j] = cost[SLOTS * b + j - 1]
+                choice[SLOTS * b + j] = 0
+    # the root is always an 8-wide node
+    s = cost[SLOTS * 0 + 1] if nodes[0].count else root_dist
+    sah[0] = (area[0] * node_cost + s) / (area[0] if area[0] > 0 else 1.0)
+
+    # top down: write the nodes and leaf groups
+    n_out = 1
+    ng = 0
+    work[0] = 0                 # (binary node, node8 slot) pairs to fill
+    work[1] = 0
+    sp = 1
+    while sp > 0:
+        sp -= 1
+        b = work[2 * sp]
+        w = work[2 * sp + 1]
+        o = &out[w]
+        if nodes[b].count:
+            kids[0] = b         # a leaf root: one leaf child
+            m = 1
+        else:               # b's subtree below b, covered with 8 slots
+            m = collect_slots(nodes, choice, b + 1, split8[b], kids, 0)
+            m = collect_slots(nodes, choice, nodes[b].offset, WIDTH8 - split8[b], kids, m)
+        for k in range(WIDTH8):
+            for a in range(3):
+                o.lo[a][k] = INFINITY
+                o.hi[a][k] = -INFINITY
+            o.child[k] = 0
+            o.count[k] = 0
+        for k in range(4):
+            o.pad[k] = 0
+        for k in range(m):
+            kid = kids[k]
+            for a in range(3):
+                o.lo[a][k] = nodes[kid].lo[a]
+                o.hi[a][k] = nodes[kid].hi[a]
+            if nodes[kid].count or choice[SLOTS * kid + 1] == AS_LEAF:
+                # the subtree's triangles are contiguous, from its leftmost leaf on
+                c = kid
+                while nodes[c].count == 0:
+                    c += 1
+                first = nodes[c].offset
+                o.child[k] = -ng - 1
+                o.count[k] = <unsigned short> groups_of(ntri[kid])
+                j = 0
+                while j < ntri[kid]:
+                    pack_group(tris, first + j, ntri[kid] - j if ntri[kid] - j < WIDTH8 else WIDTH8,
+                               &groups[ng])
+                    ng += 1
+                    j += WIDTH8
+            else:
+                o.child[k] = n_out
+                work[2 * sp] = kid
+                work[2 * sp + 1] = n_out
+                sp += 1
+                n_out += 1
+    n_groups[0] = ng
+    # depth: longest chain of 8-wide nodes (children are written after parents)
+    level = <int *> malloc(n_out * sizeof(int))
+    if level == NULL:
+        free(area); free(ntri); free(cost); free(choice); free(split8); free(work)
+        with gil:
+            raise MemoryError()
+    level[0] = 1
+    depth[0] = 1
+    for w in range(n_out):
+        for k in range(WIDTH8):
+            if out[w].child[k] > 0:
+                level[out[w].child[k]] = level[w] + 1
+                if level[w] + 1 > depth[0]:
+                    depth[0] = level[w] + 1
+    free(level); free(area); free(ntri); free(cost); free(choice); free(split8); free(work)
+    return n_out
+
+
+def collapse8(unsigned char[::1] node_bytes, unsigned char[::1] tri_bytes,
+              unsigned char[::1] out_bytes, unsigned char[::1] group_bytes,
+              double node_cost, double group_cost, int max_leaf):
+    """Collapse binary nodes into 8-wide nodes and SoA leaf groups;
+    returns (nodes, groups, depth, SAH cost)."""
+    cdef int n_nodes = node_bytes.shape[0] // sizeof(rs_node), n_out, n_groups = 0, depth = 0
+    cdef double sah = 0
+    with nogil:
+        n_out = collapse8_nodes(<const rs_node *> &node_bytes[0], n_nodes,
+                                <const rs_tri *> &tri_bytes[0], node_cost, group_cost, max_leaf,
+                                <rs_node8 *> &out_bytes[0], <rs_tri8 *> &group_bytes[0],
+                                &n_groups, &depth, &sah)
+    return n_out, n_groups, depth, sah

@@ -1,7 +1,8 @@
 """C-level layouts and kernels of raysort, for Cython modules to cimport.
 
-Declares the structs of ``raysort/include/raysort/types.h`` and the shared
-numeric kernels of ``raysort/include/raysort/simd.h`` (the one SIMD header).
+Declares the structs of ``raysort/include/raysort/types.h``, the shared
+numeric kernels of ``raysort/include/raysort/simd.h`` (the one SIMD header)
+and the 8-lane kernels of ``raysort/include/raysort/wide8.h``.
 An outside plugin compiled with ``include_dirs=[raysort.get_include()]`` can
 ``from raysort._types cimport rs_rays, rs_box4`` and use exactly the arithmetic
 the built-in traversals use.
@@ -28,6 +29,19 @@ cdef extern from "raysort/types.h" nogil:
         int32_t child[4]    # >= 0 inner node4, < 0 leaf: triangles from -child - 1
         uint16_t count[4]   # leaf triangle count, 0 otherwise
         int32_t pad[2]
+
+    ctypedef struct rs_node8:
+        float lo[3][8]      # lo[axis][child]
+        float hi[3][8]
+        int32_t child[8]    # >= 0 inner node8, < 0 leaf: groups from -child - 1
+        uint16_t count[8]   # rs_tri8 groups of a leaf child, 0 otherwise
+        int32_t pad[4]
+
+    ctypedef struct rs_tri8:
+        float v0[3][8]      # v0[axis][lane]
+        float e1[3][8]
+        float e2[3][8]
+        int32_t id[8]       # index in the input mesh; INT32_MAX in an unused lane
 
     ctypedef struct rs_tri:
         float v0[3]
@@ -93,3 +107,13 @@ cdef inline rs_rays rays_view(float[:, ::1] rows, int32_t[::1] prim, float[::1] 
     r.u = &u[0]
     r.v = &v[0]
     return r
+
+
+cdef extern from "raysort/wide8.h" nogil:
+    ctypedef struct rs_ray8:
+        pass
+    int rs_lowest_bit(unsigned m)
+    void rs_ray8_load(const rs_rays *r, int i, rs_ray8 *ray)
+    int rs_node8_hit(const rs_rays *r, int i, const rs_ray8 *ray, const rs_node8 *n,
+                     float entry[8])
+    int rs_tri8_hit(rs_rays *r, int i, const rs_ray8 *ray, const rs_tri8 *g, int any_hit)

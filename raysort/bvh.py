@@ -9,6 +9,8 @@ edges ``e1``/``e2`` and the input index ``id``), ready for Moller-Trumbore.
 from __future__ import annotations
 
 import threading
+import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -17,8 +19,8 @@ from raysort.mesh import check_mesh
 from raysort.params import integer, number
 from raysort.rays import aligned_empty
 
-__all__ = ["BVH", "NODE_DTYPE", "NODE4_DTYPE", "TRI_DTYPE", "prepare_triangles",
-           "degenerate_faces"]
+__all__ = ["BVH", "Wide8", "NODE_DTYPE", "NODE4_DTYPE", "NODE8_DTYPE", "TRI_DTYPE",
+           "TRI8_DTYPE", "prepare_triangles", "degenerate_faces"]
 
 NODE_DTYPE = np.dtype([
     ("lo", "<f4", (3,)), ("hi", "<f4", (3,)),
@@ -28,11 +30,29 @@ NODE4_DTYPE = np.dtype([
     ("lo", "<f4", (3, 4)), ("hi", "<f4", (3, 4)),
     ("child", "<i4", (4,)), ("count", "<u2", (4,)), ("pad", "<i4", (2,)),
 ])
+NODE8_DTYPE = np.dtype([
+    ("lo", "<f4", (3, 8)), ("hi", "<f4", (3, 8)),
+    ("child", "<i4", (8,)), ("count", "<u2", (8,)), ("pad", "<i4", (4,)),
+])
+TRI8_DTYPE = np.dtype([
+    ("v0", "<f4", (3, 8)), ("e1", "<f4", (3, 8)), ("e2", "<f4", (3, 8)), ("id", "<i4", (8,)),
+])
 TRI_DTYPE = np.dtype([
     ("v0", "<f4", (3,)), ("e1", "<f4", (3,)), ("e2", "<f4", (3,)),
     ("id", "<i4"), ("pad", "<i4", (2,)),
 ])
 assert NODE_DTYPE.itemsize == 32 and TRI_DTYPE.itemsize == 48 and NODE4_DTYPE.itemsize == 128
+assert NODE8_DTYPE.itemsize == 256 and TRI8_DTYPE.itemsize == 320
+
+
+class Wide8(NamedTuple):
+    """The BVH collapsed to 8-wide nodes (``BVH.wide8``, for the ``wide8`` traversal)."""
+
+    nodes: np.ndarray       #: NODE8_DTYPE, root first, 64-byte aligned
+    groups: np.ndarray      #: TRI8_DTYPE leaf triangle groups, 64-byte aligned
+    depth: int              #: levels of 8-wide nodes
+    sah_cost: float         #: SAH cost (node test 1, one 8-triangle group test GROUP_COST)
+    build_seconds: float    #: time the collapse took
 
 
 def prepare_triangles(vertices, faces):
@@ -81,7 +101,16 @@ class BVH:
     wide : NODE4_DTYPE array, the same tree collapsed to 4-wide nodes (built on
         first use; child >= 0 is an inner node, child < 0 a leaf whose
         triangles start at -child - 1)
+    wide8 : :class:`Wide8`, the same tree collapsed to 8-wide nodes by a
+        SAH-optimal dynamic program, leaves as SoA groups of 8 triangles
+        (built on first use, see :meth:`collapse8`)
     """
+
+    #: SAH cost of one 8-triangle group test, relative to one 8-box node test
+    #: (measured on Sibenik and Sponza, see the README's wide8 section)
+    WIDE8_GROUP_COST = 1.0
+    #: most triangles a wide8 leaf made of several binary leaves may hold
+    WIDE8_MAX_LEAF = 16
 
     def __init__(self, vertices, faces, *, max_leaf=8, bins=16, traversal_cost=1.0):
         self.max_leaf = integer("max_leaf", max_leaf, 1, 65535)
@@ -99,6 +128,7 @@ class BVH:
         self.vertices, self.faces = vertices, faces
         self._update_bounds()
         self._wide = None
+        self._wide8 = None
         self._wide_lock = threading.Lock()
 
     @property
@@ -110,6 +140,30 @@ class BVH:
                                                    out.view(np.uint8).reshape(-1))
                 self._wide = out[:n]
             return self._wide
+
+    @property
+    def wide8(self):
+        with self._wide_lock:
+            if self._wide8 is None:
+                self._wide8 = self.collapse8()
+            return self._wide8
+
+    def collapse8(self, group_cost=None, max_leaf=None):
+        """The tree collapsed to 8-wide nodes (:class:`Wide8`) with the given SAH cost of a
+        triangle-group test (relative to a node test) and largest merged leaf."""
+        group_cost = number("group_cost", self.WIDE8_GROUP_COST if group_cost is None
+                            else group_cost, 0, 1000, lo_open=True)
+        max_leaf = integer("max_leaf", self.WIDE8_MAX_LEAF if max_leaf is None else max_leaf,
+                           1, 65535 * 8)
+        start = time.perf_counter()
+        n_leaves = int((self.nodes["count"] > 0).sum())
+        nodes = aligned_empty((len(self.nodes),), NODE8_DTYPE, 64)
+        groups = aligned_empty((len(self.triangles) // 8 + n_leaves + 1,), TRI8_DTYPE, 64)
+        n, n_groups, depth, sah = _bvh.collapse8(
+            self.nodes.view(np.uint8).reshape(-1), self.triangles.view(np.uint8).reshape(-1),
+            nodes.view(np.uint8).reshape(-1), groups.view(np.uint8).reshape(-1),
+            1.0, group_cost, max_leaf)
+        return Wide8(nodes[:n], groups[:n_groups], depth, sah, time.perf_counter() - start)
 
     def _update_bounds(self):
         self.bounds = np.stack([self.nodes[0]["lo"], self.nodes[0]["hi"]]).astype(np.float32)
@@ -123,6 +177,7 @@ class BVH:
         self._update_bounds()
         with self._wide_lock:
             self._wide = None       # collapsed again from the refitted boxes on use
+            self._wide8 = None
 
     def stats(self):
         """Node, leaf and depth figures and the SAH cost (with this tree's C_trav)."""

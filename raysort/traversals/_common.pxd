@@ -8,7 +8,7 @@ head/SIMD/tail rule, child order) are compiled into each kernel, so they cost
 no call.
 """
 from libc.stdint cimport int32_t, uint8_t
-from raysort._types cimport (rs_node, rs_node4, rs_tri, rs_rays, rs_frustum, rs_counters,
+from raysort._types cimport (rs_node, rs_node4, rs_node8, rs_tri, rs_tri8, rs_rays, rs_frustum, rs_counters,
                              rs_tri1, rs_tri4, rs_active4, rs_minf, rs_maxf, rs_prefetch)
 
 
@@ -16,10 +16,12 @@ cdef struct Geometry:
     const rs_node *nodes    # flat depth-first BVH
     const rs_tri *tris      # triangles in BVH order
     const rs_node4 *nodes4  # the BVH collapsed to 4-wide nodes (NULL unless asked for)
+    const rs_node8 *nodes8  # the BVH collapsed to 8-wide nodes (NULL unless asked for)
+    const rs_tri8 *groups8  # their leaves' SoA triangle groups
 
 
 cdef struct Scratch:
-    int32_t *stack          # 12 * stack_size ints: (node, int) pairs, or wider entries
+    int32_t *stack          # 24 * stack_size ints: (node, int) pairs, or wider entries
     int stack_size          # BVH depth + 2
     uint8_t *masks          # stack_size * groups lane masks (masked traversal)
     int32_t *ids            # groups ids (partition traversal)
@@ -31,7 +33,8 @@ ctypedef void (*packet_fn)(const Geometry *g, rs_rays *r, int start, int count,
                            int any_hit, Scratch *w, rs_counters *c) noexcept nogil
 
 
-cdef object run(packet_fn fn, object bvh, object packets, bint any_hit, bint wide=*)
+cdef object run(packet_fn fn, object bvh, object packets, bint any_hit, bint wide=*,
+                bint wide8=*)
 
 
 cdef inline bint active(const rs_rays *r, int i) noexcept nogil:

@@ -7,18 +7,22 @@ counters into a :class:`raysort.stats.Counters`.
 """
 from libc.stdlib cimport malloc, free
 from libc.stdint cimport int32_t, uint8_t
-from raysort._types cimport (rs_node, rs_node4, rs_tri, rs_rays, rs_counters, RS_MAX_PACKET,
+from raysort._types cimport (rs_node, rs_node4, rs_node8, rs_tri, rs_tri8, rs_rays, rs_counters, RS_MAX_PACKET,
                              rays_view)
 
 from raysort.errors import PluginContractError
 from raysort.stats import Counters
 
 
-cdef object run(packet_fn fn, object bvh, object packets, bint any_hit, bint wide=False):
+cdef object run(packet_fn fn, object bvh, object packets, bint any_hit, bint wide=False,
+                bint wide8=False):
     cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
     cdef const uint8_t[::1] node_bytes = bvh.nodes.view("u1").reshape(-1)
     cdef const uint8_t[::1] tri_bytes = bvh.triangles.view("u1").reshape(-1)
     cdef const uint8_t[::1] node4_bytes = (bvh.wide if wide else bvh.nodes[:0]).view("u1").reshape(-1)
+    wide8_tree = bvh.wide8 if wide8 else None
+    cdef const uint8_t[::1] node8_bytes = (wide8_tree.nodes if wide8 else bvh.nodes[:0]).view("u1").reshape(-1)
+    cdef const uint8_t[::1] group8_bytes = (wide8_tree.groups if wide8 else bvh.nodes[:0]).view("u1").reshape(-1)
     cdef Geometry geo
     cdef rs_rays rays = rays_view(packets.rows, packets.prim, packets.u, packets.v)
     cdef Scratch w
@@ -40,10 +44,12 @@ cdef object run(packet_fn fn, object bvh, object packets, bint any_hit, bint wid
     geo.nodes = <const rs_node *> &node_bytes[0]
     geo.tris = <const rs_tri *> &tri_bytes[0] if tri_bytes.shape[0] else NULL
     geo.nodes4 = <const rs_node4 *> &node4_bytes[0] if node4_bytes.shape[0] else NULL
+    geo.nodes8 = <const rs_node8 *> &node8_bytes[0] if node8_bytes.shape[0] else NULL
+    geo.groups8 = <const rs_tri8 *> &group8_bytes[0] if group8_bytes.shape[0] else NULL
 
     w.stack_size = bvh.depth + 2
     w.groups = (widest + 3) // 4
-    w.stack = <int32_t *> malloc(12 * w.stack_size * sizeof(int32_t))
+    w.stack = <int32_t *> malloc(24 * w.stack_size * sizeof(int32_t))
     w.masks = <uint8_t *> malloc(w.stack_size * w.groups * sizeof(uint8_t) + 1)
     w.ids = <int32_t *> malloc(w.groups * sizeof(int32_t) + 4)
     if w.stack == NULL or w.masks == NULL or w.ids == NULL:

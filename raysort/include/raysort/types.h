@@ -39,6 +39,31 @@ typedef struct rs_node4 {
     int32_t pad[2];
 } rs_node4;
 
+/* A node of the 8-wide BVH collapsed from the binary one by a SAH-optimal
+ * dynamic program (for the `wide8` traversal): 256 bytes, child boxes
+ * structure-of-arrays so one 8-lane operation tests a ray against all eight.
+ * child[k] >= 0 is an inner node8, child[k] < 0 a leaf whose triangle groups
+ * are [-child[k] - 1, ... + count[k]) of the rs_tri8 array; an empty slot has
+ * lo = +inf, hi = -inf, so no ray ever enters it. */
+typedef struct rs_node8 {
+    float lo[3][8];     /* lo[axis][child]: box minimum of each child */
+    float hi[3][8];     /* hi[axis][child]: box maximum of each child */
+    int32_t child[8];   /* inner node8 index (>= 0) or -(first group) - 1 (leaf) */
+    uint16_t count[8];  /* rs_tri8 groups of a leaf child, 0 otherwise */
+    int32_t pad[4];     /* 0 */
+} rs_node8;
+
+/* Up to eight triangles of one leaf, structure-of-arrays, prepared for
+ * Moller-Trumbore so one 8-lane test checks a ray against all of them: 320
+ * bytes.  Lane k holds the rs_tri fields of one triangle; an unused lane has
+ * zero edges (its determinant is 0, so it is never hit) and id INT32_MAX. */
+typedef struct rs_tri8 {
+    float v0[3][8];     /* v0[axis][lane]: first vertex */
+    float e1[3][8];     /* v1 - v0 */
+    float e2[3][8];     /* v2 - v0 */
+    int32_t id[8];      /* primitive index in the input mesh */
+} rs_tri8;
+
 /* A triangle prepared for Moller-Trumbore: 48 bytes.  `id` is the index of
  * the triangle in the input mesh; ties in t go to the lower id. */
 typedef struct rs_tri {
@@ -79,9 +104,9 @@ typedef struct rs_counters {
     int64_t rays;       /* rays submitted (active lanes) */
     int64_t ia;         /* interval-arithmetic (frustum) box tests */
     int64_t box1;       /* scalar ray-box tests */
-    int64_t box4;       /* 4-wide SIMD ray-box tests */
+    int64_t box4;       /* SIMD ray-box tests (one per 4-wide test, or per 8-wide test in wide8) */
     int64_t tri1;       /* scalar ray-triangle tests */
-    int64_t tri4;       /* 4-wide SIMD ray-triangle tests */
+    int64_t tri4;       /* SIMD ray-triangle tests (4-wide, or 8-wide in wide8) */
 } rs_counters;
 
 #endif
