@@ -20,7 +20,8 @@ class Counters:
     """Tests performed by a traversal, summed over a call or a render.
 
     ``rays`` is the number of (active) rays submitted; a SIMD test is one
-    4-wide test whatever its active lanes.  ``available`` is False for
+    test of the traversal's width (4 lanes, or 8 in ``wide8``) whatever its
+    active lanes.  ``available`` is False for
     traversals that cannot count (e.g. an external library).
     """
 

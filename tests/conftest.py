@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import raysort
+from raysort import isa
 from raysort.workloads import workload
 
 
@@ -43,3 +44,16 @@ def workloads():
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+@pytest.fixture(params=isa.ISAS)
+def each_isa(request):
+    """Switch every kernel to one ISA for the test (skipped where it cannot run)."""
+    name = request.param
+    if name not in isa.compiled():
+        pytest.skip(f"ISA {name} is not compiled into this installation")
+    if name not in isa.supported():
+        pytest.skip(f"this CPU cannot run ISA {name}")
+    previous = isa.use(name)
+    yield name
+    isa.use(previous)

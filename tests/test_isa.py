@@ -24,19 +24,6 @@ def _builtin(kind):
     return [i.name for i in raysort.list_plugins(kind) if i.distribution == "raysort"]
 
 
-@pytest.fixture(params=isa.ISAS)
-def each_isa(request):
-    """Switch every kernel to one ISA for the test (skipped where it cannot run)."""
-    name = request.param
-    if name not in isa.compiled():
-        pytest.skip(f"ISA {name} is not compiled into this installation")
-    if name not in isa.supported():
-        pytest.skip(f"this CPU cannot run ISA {name}")
-    previous = isa.use(name)
-    yield name
-    isa.use(previous)
-
-
 def test_the_best_available_isa_is_active_by_default():
     if os.environ.get("RAYSORT_ISA"):
         pytest.skip("RAYSORT_ISA forces the ISA")

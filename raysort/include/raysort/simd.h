@@ -1,6 +1,7 @@
 /* raysort: the one SIMD header.
  *
- * This is the only file that includes compiler intrinsics.  It provides
+ * With wide8.h (the 8-lane kernels built on it), the only file that includes
+ * compiler intrinsics.  It provides
  *   - a 4-lane float/mask vocabulary (rs_v4f, rs_v4m) with an SSE2 path and a
  *     portable scalar path, chosen at build time: setup.py defines
  *     RAYSORT_NO_SIMD for the "scalar" ISA build, and non-x86 machines get the

@@ -25,6 +25,7 @@
 /* ------------------------------------------------------------------------ */
 #if RS_ISA_AVX2
 typedef __m256 rs_v8f;
+typedef __m256 rs_v8m;   /* lane mask: all ones or all zeros per lane */
 
 RS_INLINE rs_v8f rs8_load(const float *p) { return _mm256_load_ps(p); }
 RS_INLINE void rs8_store(float *p, rs_v8f a) { _mm256_storeu_ps(p, a); }
@@ -36,34 +37,35 @@ RS_INLINE rs_v8f rs8_div(rs_v8f a, rs_v8f b) { return _mm256_div_ps(a, b); }
 /* MAXPS/MINPS semantics: a > b ? a : b and a < b ? a : b (rs_maxf, rs_minf) */
 RS_INLINE rs_v8f rs8_max(rs_v8f a, rs_v8f b) { return _mm256_max_ps(a, b); }
 RS_INLINE rs_v8f rs8_min(rs_v8f a, rs_v8f b) { return _mm256_min_ps(a, b); }
-RS_INLINE rs_v8f rs8_le(rs_v8f a, rs_v8f b) { return _mm256_cmp_ps(a, b, _CMP_LE_OQ); }
-RS_INLINE rs_v8f rs8_gt(rs_v8f a, rs_v8f b) { return _mm256_cmp_ps(a, b, _CMP_GT_OQ); }
-RS_INLINE rs_v8f rs8_ge(rs_v8f a, rs_v8f b) { return _mm256_cmp_ps(a, b, _CMP_GE_OQ); }
-RS_INLINE rs_v8f rs8_ne(rs_v8f a, rs_v8f b) { return _mm256_cmp_ps(a, b, _CMP_NEQ_UQ); }
-RS_INLINE rs_v8f rs8_and(rs_v8f a, rs_v8f b) { return _mm256_and_ps(a, b); }
-RS_INLINE int rs8_movemask(rs_v8f m) { return _mm256_movemask_ps(m); }
+RS_INLINE rs_v8m rs8_le(rs_v8f a, rs_v8f b) { return _mm256_cmp_ps(a, b, _CMP_LE_OQ); }
+RS_INLINE rs_v8m rs8_gt(rs_v8f a, rs_v8f b) { return _mm256_cmp_ps(a, b, _CMP_GT_OQ); }
+RS_INLINE rs_v8m rs8_ge(rs_v8f a, rs_v8f b) { return _mm256_cmp_ps(a, b, _CMP_GE_OQ); }
+RS_INLINE rs_v8m rs8_ne(rs_v8f a, rs_v8f b) { return _mm256_cmp_ps(a, b, _CMP_NEQ_UQ); }
+RS_INLINE rs_v8m rs8_and(rs_v8m a, rs_v8m b) { return _mm256_and_ps(a, b); }
+RS_INLINE int rs8_movemask(rs_v8m m) { return _mm256_movemask_ps(m); }
 #else
 typedef struct { rs_v4f h[2]; } rs_v8f;
+typedef struct { rs_v4m h[2]; } rs_v8m;
 
-#define RS8_OP(name, op4) \
-    RS_INLINE rs_v8f name(rs_v8f a, rs_v8f b) \
-    { rs_v8f r; r.h[0] = op4(a.h[0], b.h[0]); r.h[1] = op4(a.h[1], b.h[1]); return r; }
+#define RS8_OP(name, op4, R, A) \
+    RS_INLINE R name(A a, A b) \
+    { R r; r.h[0] = op4(a.h[0], b.h[0]); r.h[1] = op4(a.h[1], b.h[1]); return r; }
 
 RS_INLINE rs_v8f rs8_load(const float *p) { rs_v8f r; r.h[0] = rs_load(p); r.h[1] = rs_load(p + 4); return r; }
 RS_INLINE void rs8_store(float *p, rs_v8f a) { rs_store(p, a.h[0]); rs_store(p + 4, a.h[1]); }
 RS_INLINE rs_v8f rs8_set1(float a) { rs_v8f r; r.h[0] = r.h[1] = rs_set1(a); return r; }
-RS8_OP(rs8_add, rs_add)
-RS8_OP(rs8_sub, rs_sub)
-RS8_OP(rs8_mul, rs_mul)
-RS8_OP(rs8_div, rs_div)
-RS8_OP(rs8_max, rs_max)
-RS8_OP(rs8_min, rs_min)
-RS8_OP(rs8_le, rs_le)
-RS8_OP(rs8_gt, rs_gt)
-RS8_OP(rs8_ge, rs_ge)
-RS8_OP(rs8_ne, rs_ne)
-RS8_OP(rs8_and, rs_and)
-RS_INLINE int rs8_movemask(rs_v8f m) { return rs_movemask(m.h[0]) | rs_movemask(m.h[1]) << 4; }
+RS8_OP(rs8_add, rs_add, rs_v8f, rs_v8f)
+RS8_OP(rs8_sub, rs_sub, rs_v8f, rs_v8f)
+RS8_OP(rs8_mul, rs_mul, rs_v8f, rs_v8f)
+RS8_OP(rs8_div, rs_div, rs_v8f, rs_v8f)
+RS8_OP(rs8_max, rs_max, rs_v8f, rs_v8f)
+RS8_OP(rs8_min, rs_min, rs_v8f, rs_v8f)
+RS8_OP(rs8_le, rs_le, rs_v8m, rs_v8f)
+RS8_OP(rs8_gt, rs_gt, rs_v8m, rs_v8f)
+RS8_OP(rs8_ge, rs_ge, rs_v8m, rs_v8f)
+RS8_OP(rs8_ne, rs_ne, rs_v8m, rs_v8f)
+RS8_OP(rs8_and, rs_and, rs_v8m, rs_v8m)
+RS_INLINE int rs8_movemask(rs_v8m m) { return rs_movemask(m.h[0]) | rs_movemask(m.h[1]) << 4; }
 #undef RS8_OP
 #endif
 
@@ -137,7 +139,7 @@ RS_INLINE int rs_tri8_hit(rs_rays *r, int i, const rs_ray8 *ray, const rs_tri8 *
 
     const rs_v8f zero = rs8_set1(0.0f), one = rs8_set1(1.0f);
     float best = r->t[i];
-    rs_v8f ok = rs8_and(rs8_and(rs8_ne(det, zero), rs8_ge(u, zero)),
+    rs_v8m ok = rs8_and(rs8_and(rs8_ne(det, zero), rs8_ge(u, zero)),
                         rs8_and(rs8_ge(v, zero), rs8_le(rs8_add(u, v), one)));
     /* t > tmin and t <= best; t == best with a higher id is dropped below */
     ok = rs8_and(ok, rs8_and(rs8_gt(t, rs8_set1(r->tmin[i])), rs8_le(t, rs8_set1(best))));

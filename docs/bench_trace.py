@@ -1,0 +1,153 @@
+"""Rays per second through ``Pipeline.trace`` for several configurations, side by side.
+
+Usage (from any directory, with raysort installed; ``embree`` needs
+``pip install ./plugins/raysort-embree``)::
+
+    python docs/bench_trace.py                              # Sibenik, Sponza, forest
+    python docs/bench_trace.py --scenes sibenik --rounds 9 --json trace.json
+    python docs/bench_trace.py --configs nah+wide8 nah+wide embree --kinds diffuse
+
+Each configuration is ``SORTER+TRAVERSAL`` (optionally ``@TILE`` for the tile edge of
+camera rays, e.g. ``none+ranged@8``) or a bare traversal (sorter ``none``).  For each
+scene and ray kind (``diffuse``: first-bounce diffuse rays of a 256x256 render at 1
+spp, in the render's large packets; ``camera``: its primary rays) every configuration
+traces the same rays through ``Pipeline.trace`` (sort + gather + traverse + scatter),
+one thread, plugin checks off for trusted plugins.  Each round runs every
+configuration once in an order rotated by one per round (interleaved, round 0 warms
+up and is dropped).  Reported: Mrays/s as the median over rounds with [min, max], and
+the medians [min, max] of the per-round speed ratios against the reference
+configurations (``--against``, default ``embree`` and ``nah+wide``).  Times are the
+measuring thread's CPU time (``--clock cpu``, default; robust to other load on the
+machine) or wall time (``--clock wall``).  The header names the CPU and the ISA.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import statistics
+import sys
+import time
+
+import raysort
+from raysort import isa
+from raysort.workloads import camera_rays, workload
+
+DEFAULT_CONFIGS = ["nah+wide8", "none+wide8", "two_point+wide8", "nah+wide", "none+wide",
+                   "nah+ranged", "none+ranged@8", "embree"]
+CLOCKS = {"cpu": time.thread_time, "wall": time.perf_counter}
+
+
+def machine():
+    model = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as fh:
+            model = next(line.split(":", 1)[1].strip() for line in fh
+                         if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return {"cpu": model, "isa": isa.active(), "isa_info": isa.info()}
+
+
+def parse_config(text):
+    """``"nah+wide8@8"`` -> (sorter, traversal, tile)."""
+    body, _, tile = text.partition("@")
+    sorter, _, traversal = body.rpartition("+")
+    return sorter or "none", traversal, int(tile) if tile else 32
+
+
+def rays_of(scene, kind, size, tile):
+    if kind == "diffuse":
+        return workload(scene, "diffuse:depth=1", width=size, height=size, spp=1, seed=1,
+                        tile=tile)
+    return camera_rays(scene, width=size, height=size, spp=1, seed=1, tile=tile)[0]
+
+
+def measure(scene_name, kind, configs, rounds, size, clock):
+    scene = raysort.load_scene(scene_name)
+    start = time.perf_counter()
+    bvh = scene.bvh()
+    build = {"binary_s": time.perf_counter() - start}
+    wide8 = bvh.wide8
+    build.update(wide8_s=wide8.build_seconds, wide8_sah=wide8.sah_cost,
+                 binary_sah=bvh.stats()["sah_cost"], wide8_nodes=len(wide8.nodes),
+                 wide8_groups=len(wide8.groups), wide8_depth=wide8.depth)
+    pipes, works = {}, {}
+    for c in configs:
+        sorter, traversal, tile = parse_config(c)
+        pipes[c] = raysort.Pipeline(scene, sorter=sorter, traversal=traversal, tile=tile,
+                                    threads=1, check_plugins=False)
+        pipes[c]._bvh = bvh                      # one BVH for all (built above)
+        if tile not in works:
+            works[tile] = rays_of(scene, kind, size, tile if kind == "camera" else 32)
+    times = {c: [] for c in configs}
+    for r in range(rounds + 1):                  # round 0 warms up and is not kept
+        for k in range(len(configs)):
+            c = configs[(k + r) % len(configs)]
+            work = works[parse_config(c)[2]]
+            t0 = clock()
+            pipes[c].trace(work.rays, work.packets)
+            dt = clock() - t0
+            if r:
+                times[c].append(dt)
+    n = len(next(iter(works.values())).rays)
+    return n, times, build
+
+
+def ratios(num, den):
+    rs = [b / a for a, b in zip(num, den)]        # speed ratio: time of den / time of num
+    return [statistics.median(rs), min(rs), max(rs)]
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scenes", nargs="+", default=["sibenik", "sponza", "forest"])
+    ap.add_argument("--kinds", nargs="+", default=["diffuse", "camera"],
+                    choices=["diffuse", "camera"])
+    ap.add_argument("--configs", nargs="+", default=DEFAULT_CONFIGS)
+    ap.add_argument("--against", nargs="+", default=["embree", "nah+wide"])
+    ap.add_argument("--rounds", type=int, default=7)
+    ap.add_argument("--size", type=int, default=256)
+    ap.add_argument("--clock", choices=sorted(CLOCKS), default="cpu")
+    ap.add_argument("--json")
+    args = ap.parse_args(argv)
+    installed = set(raysort.available("traversals"))
+    configs = [c for c in args.configs if parse_config(c)[1] in installed]
+    for c in sorted(set(args.configs) - set(configs)):
+        print(f"skipping {c}: traversal not installed", file=sys.stderr)
+    info = machine()
+    print(f"CPU: {info['cpu']}; raysort ISA: {info['isa']} (compiled: "
+          f"{', '.join(info['isa_info']['compiled'])}); one thread; {args.rounds} interleaved "
+          f"rounds; {args.clock} time; Mrays/s median [min, max]")
+    results = []
+    for scene in args.scenes:
+        for kind in args.kinds:
+            n, times, build = measure(scene, kind, configs, args.rounds, args.size,
+                                      CLOCKS[args.clock])
+            print(f"\n### {scene}, {kind} rays ({n}); BVH {build['binary_s']:.2f} s, wide8 "
+                  f"collapse {build['wide8_s'] * 1e3:.0f} ms, SAH binary "
+                  f"{build['binary_sah']:.1f} / wide8 {build['wide8_sah']:.2f}\n")
+            refs = [a for a in args.against if a in times]
+            print("| configuration | Mrays/s [min, max] | " +
+                  " | ".join(f"speed vs {a} [min, max]" for a in refs) + " |")
+            print("|---|---|" + "---|" * len(refs))
+            rows = []
+            for c in configs:
+                speeds = [n / t / 1e6 for t in times[c]]
+                row = {"scene": scene, "kind": kind, "config": c, "rays": n,
+                       "mrays_s": [statistics.median(speeds), min(speeds), max(speeds)],
+                       "vs": {a: ratios(times[c], times[a]) for a in refs}, "build": build}
+                rows.append(row)
+                m = row["mrays_s"]
+                print(f"| {c} | {m[0]:.2f} [{m[1]:.2f}, {m[2]:.2f}] | " +
+                      " | ".join("{:.2f}x [{:.2f}, {:.2f}]".format(*row["vs"][a]) for a in refs)
+                      + " |")
+            results += rows
+            sys.stdout.flush()
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as fh:
+            json.dump({"machine": info, "args": vars(args), "results": results}, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()
