@@ -135,12 +135,13 @@ RS_INLINE int rs_tri8_hit(rs_rays *r, int i, const rs_ray8 *ray, const rs_tri8 *
     rs_v8f qy = rs8_sub(rs8_mul(sz, e1x), rs8_mul(sx, e1z));
     rs_v8f qz = rs8_sub(rs8_mul(sx, e1y), rs8_mul(sy, e1x));
     rs_v8f v = rs8_mul(rs8_add(rs8_add(rs8_mul(dx, qx), rs8_mul(dy, qy)), rs8_mul(dz, qz)), inv);
-    rs_v8f t = rs8_mul(rs8_add(rs8_add(rs8_mul(e2x, qx), rs8_mul(e2y, qy)), rs8_mul(e2z, qz)), inv);
-
     const rs_v8f zero = rs8_set1(0.0f), one = rs8_set1(1.0f);
-    float best = r->t[i];
     rs_v8m ok = rs8_and(rs8_and(rs8_ne(det, zero), rs8_ge(u, zero)),
                         rs8_and(rs8_ge(v, zero), rs8_le(rs8_add(u, v), one)));
+    if (!rs8_movemask(ok))      /* the ray passes outside all eight: t is not needed */
+        return 0;
+    rs_v8f t = rs8_mul(rs8_add(rs8_add(rs8_mul(e2x, qx), rs8_mul(e2y, qy)), rs8_mul(e2z, qz)), inv);
+    float best = r->t[i];
     /* t > tmin and t <= best; t == best with a higher id is dropped below */
     ok = rs8_and(ok, rs8_and(rs8_gt(t, rs8_set1(r->tmin[i])), rs8_le(t, rs8_set1(best))));
     int bits = rs8_movemask(ok);
