@@ -108,9 +108,9 @@ class BVH:
 
     #: SAH cost of one 8-triangle group test, relative to one 8-box node test
     #: (measured on Sibenik and Sponza, see the README's wide8 section)
-    WIDE8_GROUP_COST = 1.0
+    WIDE8_GROUP_COST = 0.4
     #: most triangles a wide8 leaf made of several binary leaves may hold
-    WIDE8_MAX_LEAF = 16
+    WIDE8_MAX_LEAF = 32
 
     def __init__(self, vertices, faces, *, max_leaf=8, bins=16, traversal_cost=1.0):
         self.max_leaf = integer("max_leaf", max_leaf, 1, 65535)

@@ -131,9 +131,9 @@ class Wide8Traversal(Traversal):
     ========================== ======= ==========================================
     ``BVH`` attribute          default meaning
     ========================== ======= ==========================================
-    ``WIDE8_GROUP_COST``       1.0     SAH cost of one 8-triangle group test
+    ``WIDE8_GROUP_COST``       0.4     SAH cost of one 8-triangle group test
                                        relative to one 8-box node test
-    ``WIDE8_MAX_LEAF``         16      most triangles of a leaf merged from
+    ``WIDE8_MAX_LEAF``         32      most triangles of a leaf merged from
                                        several binary leaves
     ========================== ======= ==========================================
     """
