@@ -225,7 +225,7 @@ class Pipeline:
     generator, sorter, traversal, shader : str or dict or plugin instance
         a plugin name (``"nah"``), a spec (``"none:packet_size=1024"``) or a
         dict with a ``"type"`` key and parameters.  The defaults, ``nah`` and
-        ``wide``, are the fastest combination measured (BENCHMARKS.md).
+        ``wide8``, are the fastest exact combination measured (BENCHMARKS.md).
     tile : int, default 32
         tile edge in pixels; one sample pass over a tile is a large packet.
     threads : int, default 1
@@ -240,7 +240,7 @@ class Pipeline:
         BVH build parameters (``max_leaf``, ``bins``, ``traversal_cost``).
     """
 
-    def __init__(self, scene=None, *, generator="pinhole", sorter="nah", traversal="wide",
+    def __init__(self, scene=None, *, generator="pinhole", sorter="nah", traversal="wide8",
                  shader="lambert", tile=32, threads=1, batch_rays=16384, check_plugins=True,
                  bvh=None):
         if not (scene is None or isinstance(scene, (Scene, str, os.PathLike))):

@@ -83,6 +83,8 @@ cdef void trace_wide8(const Geometry *g, rs_rays *r, int start, int count, int a
                 for k in range(m - 1, 0, -1):      # farther children wait, farthest deepest
                     stack[sp] = hit[k]
                     sp += 1
+                    rs_prefetch(&g.nodes8[hit[k].ref] if hit[k].ref >= 0
+                                else <const rs_node8 *> &g.groups8[-hit[k].ref - 1])
                 if m:
                     ref = hit[0].ref
                     groups = hit[0].groups
