@@ -467,7 +467,7 @@ cdef int collapse8_nodes(const rs_node *nodes, int n_nodes, const rs_tri *tris,
     cdef int b, i, j, k, a, L, R, best_k, sp, n_out, w, m, c, ng, first, kid
     cdef int kids[WIDTH8]
     cdef double dist[SLOTS]
-    cdef double leaf, inner, s, root_dist = 0
+    cdef double leaf, inner, s, dx, dy, dz, root_dist = 0
     cdef rs_node8 *o
     if (area == NULL or ntri == NULL or cost == NULL or choice == NULL or split8 == NULL
             or work == NULL):
@@ -476,9 +476,10 @@ cdef int collapse8_nodes(const rs_node *nodes, int n_nodes, const rs_tri *tris,
             raise MemoryError()
     # bottom up (children follow their parent in the depth-first array)
     for b in range(n_nodes - 1, -1, -1):
-        area[b] = (<double> nodes[b].hi[0] - nodes[b].lo[0]) * (<double> nodes[b].hi[1] - nodes[b].lo[1]) \
-            + (<double> nodes[b].hi[1] - nodes[b].lo[1]) * (<double> nodes[b].hi[2] - nodes[b].lo[2]) \
-            + (<double> nodes[b].hi[2] - nodes[b].lo[2]) * (<double> nodes[b].hi[0] - nodes[b].lo[0])
+        dx = <double> nodes[b].hi[0] - nodes[b].lo[0]
+        dy = <double> nodes[b].hi[1] - nodes[b].lo[1]
+        dz = <double> nodes[b].hi[2] - nodes[b].lo[2]
+        area[b] = dx * dy + dy * dz + dz * dx
         if area[b] < 0:
             area[b] = 0
         for i in range(SLOTS):

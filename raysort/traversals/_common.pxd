@@ -8,8 +8,9 @@ head/SIMD/tail rule, child order) are compiled into each kernel, so they cost
 no call.
 """
 from libc.stdint cimport int32_t, uint8_t
-from raysort._types cimport (rs_node, rs_node4, rs_node8, rs_tri, rs_tri8, rs_rays, rs_frustum, rs_counters,
-                             rs_tri1, rs_tri4, rs_active4, rs_minf, rs_maxf, rs_prefetch)
+from raysort._types cimport (rs_node, rs_node4, rs_node8, rs_tri, rs_tri8, rs_rays, rs_frustum,
+                             rs_counters, rs_tri1, rs_tri4, rs_active4, rs_minf, rs_maxf,
+                             rs_prefetch)
 
 
 cdef struct Geometry:

@@ -7,8 +7,8 @@ counters into a :class:`raysort.stats.Counters`.
 """
 from libc.stdlib cimport malloc, free
 from libc.stdint cimport int32_t, uint8_t
-from raysort._types cimport (rs_node, rs_node4, rs_node8, rs_tri, rs_tri8, rs_rays, rs_counters, RS_MAX_PACKET,
-                             rays_view)
+from raysort._types cimport (rs_node, rs_node4, rs_node8, rs_tri, rs_tri8, rs_rays, rs_counters,
+                             RS_MAX_PACKET, rays_view)
 
 from raysort.errors import PluginContractError
 from raysort.stats import Counters
@@ -20,9 +20,10 @@ cdef object run(packet_fn fn, object bvh, object packets, bint any_hit, bint wid
     cdef const uint8_t[::1] node_bytes = bvh.nodes.view("u1").reshape(-1)
     cdef const uint8_t[::1] tri_bytes = bvh.triangles.view("u1").reshape(-1)
     cdef const uint8_t[::1] node4_bytes = (bvh.wide if wide else bvh.nodes[:0]).view("u1").reshape(-1)
-    wide8_tree = bvh.wide8 if wide8 else None
-    cdef const uint8_t[::1] node8_bytes = (wide8_tree.nodes if wide8 else bvh.nodes[:0]).view("u1").reshape(-1)
-    cdef const uint8_t[::1] group8_bytes = (wide8_tree.groups if wide8 else bvh.nodes[:0]).view("u1").reshape(-1)
+    none = bvh.nodes[:0]
+    tree8 = bvh.wide8 if wide8 else None
+    cdef const uint8_t[::1] node8_bytes = (tree8.nodes if wide8 else none).view("u1").reshape(-1)
+    cdef const uint8_t[::1] group8_bytes = (tree8.groups if wide8 else none).view("u1").reshape(-1)
     cdef Geometry geo
     cdef rs_rays rays = rays_view(packets.rows, packets.prim, packets.u, packets.v)
     cdef Scratch w

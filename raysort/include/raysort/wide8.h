@@ -51,7 +51,8 @@ typedef struct { rs_v4m h[2]; } rs_v8m;
     RS_INLINE R name(A a, A b) \
     { R r; r.h[0] = op4(a.h[0], b.h[0]); r.h[1] = op4(a.h[1], b.h[1]); return r; }
 
-RS_INLINE rs_v8f rs8_load(const float *p) { rs_v8f r; r.h[0] = rs_load(p); r.h[1] = rs_load(p + 4); return r; }
+RS_INLINE rs_v8f rs8_load(const float *p)
+{ rs_v8f r; r.h[0] = rs_load(p); r.h[1] = rs_load(p + 4); return r; }
 RS_INLINE void rs8_store(float *p, rs_v8f a) { rs_store(p, a.h[0]); rs_store(p + 4, a.h[1]); }
 RS_INLINE rs_v8f rs8_set1(float a) { rs_v8f r; r.h[0] = r.h[1] = rs_set1(a); return r; }
 RS8_OP(rs8_add, rs_add, rs_v8f, rs_v8f)
