@@ -2,7 +2,8 @@
 
 A sorter, traversal, shader or generator, built in or from another package,
 imports from here (and, in Cython, cimports the C layouts of
-``raysort/_types.pxd`` built against :func:`get_include`)::
+``raysort/_types.pxd`` and the traversal driver of ``raysort/sdk/driver.pxd``,
+built against :func:`get_include`)::
 
     from raysort.sdk import Sorter, fixed_packets, integer
 
