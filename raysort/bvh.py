@@ -15,34 +15,13 @@ from typing import NamedTuple
 import numpy as np
 
 from raysort import _bvh
+from raysort._layout import NODE4_DTYPE, NODE8_DTYPE, NODE_DTYPE, TRI8_DTYPE, TRI_DTYPE
 from raysort.mesh import check_mesh
 from raysort.params import integer, number
 from raysort.rays import aligned_empty
 
 __all__ = ["BVH", "Wide8", "NODE_DTYPE", "NODE4_DTYPE", "NODE8_DTYPE", "TRI_DTYPE",
            "TRI8_DTYPE", "prepare_triangles", "degenerate_faces"]
-
-NODE_DTYPE = np.dtype([
-    ("lo", "<f4", (3,)), ("hi", "<f4", (3,)),
-    ("offset", "<i4"), ("count", "<u2"), ("axis", "u1"), ("flags", "u1"),
-])
-NODE4_DTYPE = np.dtype([
-    ("lo", "<f4", (3, 4)), ("hi", "<f4", (3, 4)),
-    ("child", "<i4", (4,)), ("count", "<u2", (4,)), ("pad", "<i4", (2,)),
-])
-NODE8_DTYPE = np.dtype([
-    ("lo", "<f4", (3, 8)), ("hi", "<f4", (3, 8)),
-    ("child", "<i4", (8,)), ("count", "<u2", (8,)), ("pad", "<i4", (4,)),
-])
-TRI8_DTYPE = np.dtype([
-    ("v0", "<f4", (3, 8)), ("e1", "<f4", (3, 8)), ("e2", "<f4", (3, 8)), ("id", "<i4", (8,)),
-])
-TRI_DTYPE = np.dtype([
-    ("v0", "<f4", (3,)), ("e1", "<f4", (3,)), ("e2", "<f4", (3,)),
-    ("id", "<i4"), ("pad", "<i4", (2,)),
-])
-assert NODE_DTYPE.itemsize == 32 and TRI_DTYPE.itemsize == 48 and NODE4_DTYPE.itemsize == 128
-assert NODE8_DTYPE.itemsize == 256 and TRI8_DTYPE.itemsize == 320
 
 
 class Wide8(NamedTuple):

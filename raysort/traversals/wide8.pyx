@@ -11,9 +11,9 @@ inputs (v0, e1, e2) precomputed, tested eight at a time.  Every lane performs
 (t, id), so the hits equal brute force bit for bit (see wide8.h).
 """
 from libc.stdint cimport int32_t
-from raysort._types cimport (rs_node8, rs_rays, rs_counters, rs_ray8, rs_ray8_load, rs_node8_hit,
-                             rs_tri8_hit, rs_lowest_bit, rs_prefetch, RS_BOX_SLACK)
-from raysort.traversals._common cimport Geometry, Scratch, run, active
+from raysort._types cimport (rs_node8, rs_tri8, rs_rays, rs_counters, rs_ray8, rs_ray8_load,
+                             rs_node8_hit, rs_tri8_hit, rs_lowest_bit, rs_prefetch, RS_BOX_SLACK)
+from raysort.sdk.driver cimport Kernel, Geometry, Scratch, run, active
 
 from raysort import isa
 from raysort.plugin import Traversal
@@ -25,18 +25,18 @@ cdef struct Entry:
     float entry         # where the ray enters the box
 
 
-cdef inline void prefetch_node8(const Geometry *g, int ref) noexcept nogil:
+cdef inline void prefetch_node8(const rs_node8 *nodes8, int ref) noexcept nogil:
     """Ask for an 8-wide node's four cache lines (boxes, then children)."""
-    cdef const char *p = <const char *> &g.nodes8[ref]
+    cdef const char *p = <const char *> &nodes8[ref]
     rs_prefetch(p)
     rs_prefetch(p + 64)
     rs_prefetch(p + 128)
     rs_prefetch(p + 192)
 
 
-cdef inline void prefetch_group(const Geometry *g, int group) noexcept nogil:
+cdef inline void prefetch_group(const rs_tri8 *groups8, int group) noexcept nogil:
     """Ask for a triangle group's five cache lines."""
-    cdef const char *p = <const char *> &g.groups8[group]
+    cdef const char *p = <const char *> &groups8[group]
     rs_prefetch(p)
     rs_prefetch(p + 64)
     rs_prefetch(p + 128)
@@ -54,6 +54,8 @@ cdef void trace_wide8(const Geometry *g, rs_rays *r, int start, int count, int a
     cdef rs_ray8 ray
     cdef int i, k, j, m, mask, sp, ref, groups
     cdef const rs_node8 *n
+    cdef const rs_node8 *nodes8 = <const rs_node8 *> g.tree      # BVH.wide8.nodes
+    cdef const rs_tri8 *groups8 = <const rs_tri8 *> g.leaves     # BVH.wide8.groups
     for i in range(start, start + count):
         if not active(r, i):
             continue
@@ -63,7 +65,7 @@ cdef void trace_wide8(const Geometry *g, rs_rays *r, int start, int count, int a
         groups = 0
         while True:
             if ref >= 0:
-                n = &g.nodes8[ref]
+                n = &nodes8[ref]
                 c.box4 += 1
                 mask = rs_node8_hit(r, i, &ray, n, entry)
                 # the children hit, nearest first (insertion sort of at most 8)
@@ -83,20 +85,20 @@ cdef void trace_wide8(const Geometry *g, rs_rays *r, int start, int count, int a
                 for k in range(m - 1, 0, -1):      # farther children wait, farthest deepest
                     stack[sp] = hit[k]
                     sp += 1
-                    rs_prefetch(&g.nodes8[hit[k].ref] if hit[k].ref >= 0
-                                else <const rs_node8 *> &g.groups8[-hit[k].ref - 1])
+                    rs_prefetch(&nodes8[hit[k].ref] if hit[k].ref >= 0
+                                else <const rs_node8 *> &groups8[-hit[k].ref - 1])
                 if m:
                     ref = hit[0].ref
                     groups = hit[0].groups
                     if ref >= 0:
-                        prefetch_node8(g, ref)
+                        prefetch_node8(nodes8, ref)
                     else:
-                        prefetch_group(g, -ref - 1)
+                        prefetch_group(groups8, -ref - 1)
                     continue
             else:
                 for k in range(-ref - 1, -ref - 1 + groups):
                     c.tri4 += 1
-                    rs_tri8_hit(r, i, &ray, &g.groups8[k], any_hit)
+                    rs_tri8_hit(r, i, &ray, &groups8[k], any_hit)
                 if not active(r, i):        # an any-hit query found its hit
                     break
             # the nearest waiting box the ray still reaches before its closest hit
@@ -112,9 +114,14 @@ cdef void trace_wide8(const Geometry *g, rs_rays *r, int start, int count, int a
     counters[0] = c
 
 
+# up to seven waiting children per level (the 8-wide tree is no deeper than the binary one)
+cdef Kernel WIDE8 = Kernel(trace_wide8, 7 * sizeof(Entry), 0, 0)
+
+
 def trace(bvh, packets, bint any_hit):
     """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa)."""
-    return run(trace_wide8, bvh, packets, any_hit, False, True)
+    tree = bvh.wide8
+    return run(&WIDE8, bvh, packets, any_hit, tree.nodes, tree.groups)
 
 
 class Wide8Traversal(Traversal):
