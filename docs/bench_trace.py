@@ -6,13 +6,15 @@ Usage (from any directory, with raysort installed; ``embree`` needs
     python docs/bench_trace.py                              # Sibenik, Sponza, forest
     python docs/bench_trace.py --scenes sibenik --rounds 9 --json trace.json
     python docs/bench_trace.py --configs nah+wide8 nah+wide embree --kinds diffuse
+    python docs/bench_trace.py --kinds frame --configs nah+wide8 nah+embree --against nah+embree
 
 Each configuration is ``SORTER+TRAVERSAL`` (optionally ``@TILE`` for the tile edge of
 camera rays, e.g. ``none+ranged@8``) or a bare traversal (sorter ``none``).  For each
 scene and ray kind (``diffuse``: first-bounce diffuse rays of a 256x256 render at 1
 spp, in the render's large packets; ``camera``: its primary rays) every configuration
 traces the same rays through ``Pipeline.trace`` (sort + gather + traverse + scatter),
-one thread, plugin checks off for trusted plugins.  Each round runs every
+one thread, plugin checks off for trusted plugins; ``frame`` renders a whole frame
+instead (``Pipeline.render``, 4 spp, lambert depth 2) and reports Mpixels/s.  Each round runs every
 configuration once in an order rotated by one per round (interleaved, round 0 warms
 up and is dropped).  Reported: Mrays/s as the median over rounds with [min, max], and
 the medians [min, max] of the per-round speed ratios against the reference
@@ -79,18 +81,22 @@ def measure(scene_name, kind, configs, rounds, size, clock):
                                     threads=1, check_plugins=False)
         pipes[c]._bvh = bvh                      # one BVH for all (built above)
         if tile not in works:
-            works[tile] = rays_of(scene, kind, size, tile if kind == "camera" else 32)
+            works[tile] = None if kind == "frame" else \
+                rays_of(scene, kind, size, tile if kind == "camera" else 32)
     times = {c: [] for c in configs}
     for r in range(rounds + 1):                  # round 0 warms up and is not kept
         for k in range(len(configs)):
             c = configs[(k + r) % len(configs)]
             work = works[parse_config(c)[2]]
             t0 = clock()
-            pipes[c].trace(work.rays, work.packets)
+            if kind == "frame":
+                pipes[c].render(size, size, spp=4, seed=0)
+            else:
+                pipes[c].trace(work.rays, work.packets)
             dt = clock() - t0
             if r:
                 times[c].append(dt)
-    n = len(next(iter(works.values())).rays)
+    n = size * size if kind == "frame" else len(next(iter(works.values())).rays)
     return n, times, build
 
 
@@ -103,7 +109,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenes", nargs="+", default=["sibenik", "sponza", "forest"])
     ap.add_argument("--kinds", nargs="+", default=["diffuse", "camera"],
-                    choices=["diffuse", "camera"])
+                    choices=["diffuse", "camera", "frame"])
     ap.add_argument("--configs", nargs="+", default=DEFAULT_CONFIGS)
     ap.add_argument("--against", nargs="+", default=["embree", "nah+wide"])
     ap.add_argument("--rounds", type=int, default=7)
@@ -124,12 +130,13 @@ def main(argv=None):
         for kind in args.kinds:
             n, times, build = measure(scene, kind, configs, args.rounds, args.size,
                                       CLOCKS[args.clock])
-            print(f"\n### {scene}, {kind} rays ({n}); BVH {build['binary_s']:.2f} s, wide8 "
+            print(f"\n### {scene}, {kind} ({n} {'pixels' if kind == 'frame' else 'rays'}); BVH {build['binary_s']:.2f} s, wide8 "
                   f"collapse {build['wide8_s'] * 1e3:.0f} ms, SAH binary "
                   f"{build['binary_sah']:.1f} / wide8 {build['wide8_sah']:.2f}\n")
             refs = [a for a in args.against if a in times]
-            print("| configuration | Mrays/s [min, max] | " +
-                  " | ".join(f"speed vs {a} [min, max]" for a in refs) + " |")
+            unit = "Mpixels/s" if kind == "frame" else "Mrays/s"
+            print(f"| configuration | {unit} [min, max] |" +
+                  "".join(f" speed vs {a} [min, max] |" for a in refs))
             print("|---|---|" + "---|" * len(refs))
             rows = []
             for c in configs:
@@ -139,9 +146,8 @@ def main(argv=None):
                        "vs": {a: ratios(times[c], times[a]) for a in refs}, "build": build}
                 rows.append(row)
                 m = row["mrays_s"]
-                print(f"| {c} | {m[0]:.2f} [{m[1]:.2f}, {m[2]:.2f}] | " +
-                      " | ".join("{:.2f}x [{:.2f}, {:.2f}]".format(*row["vs"][a]) for a in refs)
-                      + " |")
+                print(f"| {c} | {m[0]:.2f} [{m[1]:.2f}, {m[2]:.2f}] |" +
+                      "".join(" {:.2f}x [{:.2f}, {:.2f}] |".format(*row["vs"][a]) for a in refs))
             results += rows
             sys.stdout.flush()
     if args.json:
