@@ -89,13 +89,15 @@ def default_configs(extra_sorters=(), extra_traversals=()):
         Config("single", "single", "none"),
         Config("wide", "wide", "none"),
         Config("wide + nah", "wide", "nah"),
+        Config("wide8", "wide8", "none"),
+        Config("wide8 + nah", "wide8", "nah"),
     ]
     known = {"none", "nah", "nah_numpy"}
     for sorter in extra_sorters:
         if sorter not in known:
             configs.append(Config(f"ranged + {sorter}", "ranged", sorter))
     for trav in extra_traversals:
-        if trav not in {"single", "masked", "ranged", "partition", "wide"}:
+        if trav not in {"single", "masked", "ranged", "partition", "wide", "wide8"}:
             configs.append(Config(trav, trav, "none"))
             configs.append(Config(f"{trav} + nah", trav, "nah"))
     return configs

@@ -11,7 +11,7 @@ from raysort.rays import gather
 from raysort.stats import COUNTER_LABELS
 from raysort.workloads import KINDS
 
-TRAVERSALS = ["single", "masked", "ranged", "partition", "wide"] + \
+TRAVERSALS = ["single", "masked", "ranged", "partition", "wide", "wide8"] + \
     (["embree"] if "embree" in raysort.available("traversals") else [])
 SORTERS = {"8x8": {"type": "none", "packet_size": 64},
            "32x32": {"type": "none", "packet_size": 1024},
