@@ -8,7 +8,7 @@ import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
-import raysort
+from raysort.sdk import Counters, Traversal
 
 __all__ = ["EmbreeTraversal"]
 
@@ -28,7 +28,7 @@ def _embree_scene(bvh):
         return scene
 
 
-class EmbreeTraversal(raysort.Traversal):
+class EmbreeTraversal(Traversal):
     """Embree's single-ray traversal (rtcIntersect1 / rtcOccluded1) over its own BVH.
 
     Rays are read from the gathered packets; a ray with ``tmin > 0`` is
@@ -45,26 +45,25 @@ class EmbreeTraversal(raysort.Traversal):
     exact = False
 
     def intersect(self, bvh, packets, any_hit=False):
-        rows = packets.rows
-        lanes = np.flatnonzero((packets.index >= 0) & (rows[9] < rows[10]))
+        lanes = np.flatnonzero((packets.index >= 0) & packets.active())
         if len(lanes) == 0:
-            return raysort.Counters(available=False)
-        tmin, tmax = rows[9, lanes], rows[10, lanes]
-        d = np.ascontiguousarray(rows[3:6, lanes].T)
-        o = np.ascontiguousarray((rows[0:3, lanes] + np.where(tmin > 0, tmin, 0) *
-                                  rows[3:6, lanes]).T)
+            return Counters(available=False)
+        tmin, tmax = packets.tmin[lanes], packets.t[lanes]
+        d = packets.directions[:, lanes]
+        o = np.ascontiguousarray((packets.origins[:, lanes] + np.where(tmin > 0, tmin, 0) * d).T)
+        d = np.ascontiguousarray(d.T)
         far = np.ascontiguousarray(np.minimum(tmax - tmin, np.float32(1e37)), np.float32)
         scene = _embree_scene(bvh)
         if any_hit:
             hit = scene.run(o, d, dists=far, query="OCCLUDED") >= 0
             packets.prim[lanes[hit]] = 0
-            packets.rows[10, lanes[hit]] = -np.inf
+            packets.t[lanes[hit]] = -np.inf
         else:
             res = scene.run(o, d, dists=far, query="INTERSECT", output=1)
             hit = res["primID"] >= 0
             got = lanes[hit]
             packets.prim[got] = res["primID"][hit]
-            packets.rows[10, got] = res["tfar"][hit] + tmin[hit]
+            packets.t[got] = res["tfar"][hit] + tmin[hit]
             packets.u[got] = res["u"][hit]
             packets.v[got] = res["v"][hit]
-        return raysort.Counters(rays=len(lanes), available=False)
+        return Counters(rays=len(lanes), available=False)
