@@ -74,6 +74,26 @@ def scatter_occluded(const int32_t[::1] prim, const int32_t[::1] index, unsigned
                 out[index[s]] = prim[s] >= 0
 
 
+def add_unoccluded(double[:, ::1] radiance, const int32_t[::1] slot,
+                   const float[:, :] contribution, const unsigned char[::1] occluded):
+    """``radiance[slot[i]] += contribution[:, i]`` for every ray i not occluded, in order
+    (what ``np.add.at`` does, without its per-element overhead)."""
+    cdef Py_ssize_t i, n = slot.shape[0]
+    cdef int c
+    if contribution.shape[0] != 3 or contribution.shape[1] != n or occluded.shape[0] != n \
+            or radiance.shape[1] != 3:
+        raise ValueError("add_unoccluded: radiance (k, 3), slot (n,), contribution (3, n) and "
+                         "occluded (n,) expected")
+    for i in range(n):
+        if not 0 <= slot[i] < radiance.shape[0]:
+            raise IndexError(f"add_unoccluded: slot[{i}] = {slot[i]} is out of range")
+    with nogil:
+        for i in range(n):
+            if not occluded[i]:
+                for c in range(3):
+                    radiance[slot[i], c] += contribution[c, i]
+
+
 def compiled_isa():
     """The ISA this build of the kernels was compiled for (see raysort.isa)."""
     return rs_isa_name().decode()
