@@ -39,6 +39,7 @@ ISA_MODULES = [
     "traversals.partition",
     "traversals.wide",
     "traversals.wide8",
+    "traversals.stream",
 ]
 
 

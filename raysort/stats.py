@@ -23,6 +23,9 @@ class Counters:
     test of the traversal's width (4 lanes, or 8 in ``wide8``) whatever its
     active lanes.  ``available`` is False for
     traversals that cannot count (e.g. an external library).
+    ``stream_tasks`` and ``stream_rays`` count the streams of rays a stream
+    traversal visited nodes with and the rays they held (0 for the others):
+    ``stream_rays / stream_tasks`` is the mean stream size.
     """
 
     rays: int = 0
@@ -31,6 +34,8 @@ class Counters:
     box4: int = 0
     tri1: int = 0
     tri4: int = 0
+    stream_tasks: int = 0
+    stream_rays: int = 0
     available: bool = True
 
     def __add__(self, other):

@@ -24,7 +24,7 @@ BUILTINS = {
     "generators": {"pinhole"},
     "sorters": {"none", "nah", "nah_numpy", "origin_direction", "two_point", "termination",
                 "garanzha"},
-    "traversals": {"single", "masked", "ranged", "partition", "wide", "wide8"},
+    "traversals": {"single", "masked", "ranged", "partition", "wide", "wide8", "stream"},
     "shaders": {"lambert", "ao"},
 }
 
@@ -159,7 +159,8 @@ def test_builtins_are_discovered_from_entry_points(kind, fresh):
 def test_available_is_sorted_and_rejects_unknown_kinds(fresh):
     """Names come sorted; a misspelt kind is a ConfigError listing the four kinds."""
     names = raysort.available("traversals")
-    assert names == sorted(names) == ["masked", "partition", "ranged", "single", "wide", "wide8"]
+    assert names == sorted(names) == ["masked", "partition", "ranged", "single", "stream", "wide",
+                                      "wide8"]
     with pytest.raises(ConfigError, match="kinds are: generators, sorters, traversals, shaders"):
         raysort.available("sorter")
 

@@ -155,6 +155,8 @@ typedef struct rs_counters {
     int64_t box4;       /* SIMD ray-box tests (one per 4-wide test, or per 8-wide test in wide8) */
     int64_t tri1;       /* scalar ray-triangle tests */
     int64_t tri4;       /* SIMD ray-triangle tests (4-wide, or 8-wide in wide8) */
+    int64_t stream_tasks;   /* streams of rays popped at a node (stream traversal) */
+    int64_t stream_rays;    /* rays those streams held */
 } rs_counters;
 
 #endif
