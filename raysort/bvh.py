@@ -13,6 +13,7 @@ import threading
 import numpy as np
 
 from raysort import _bvh
+from raysort.errors import ConfigError
 from raysort.mesh import check_mesh
 from raysort.params import integer, number
 from raysort.rays import aligned_empty
@@ -32,6 +33,16 @@ TRI_DTYPE = np.dtype([
     ("v0", "<f4", (3,)), ("e1", "<f4", (3,)), ("e2", "<f4", (3,)),
     ("id", "<i4"), ("pad", "<i4", (2,)),
 ])
+#: named sets of build parameters (``BVH(..., preset="manta")``, ``bvh={"preset": "manta"}``,
+#: ``raysort bench --bvh manta``); parameters given next to a preset override it.
+PRESETS = {
+    # binned SAH with DynBVH's costs (C_trav = C_isec = 1): leaves of ~2 triangles
+    "default": {"max_leaf": 8, "bins": 16, "traversal_cost": 1.0},
+    # leaves of tens of triangles, as the paper's Manta counts imply (about ten triangle
+    # tests per box test in Table I): a node visit costs as much as 16 triangle tests,
+    # and a leaf of up to 64 triangles is allowed
+    "manta": {"max_leaf": 64, "bins": 16, "traversal_cost": 16.0},
+}
 assert NODE_DTYPE.itemsize == 32 and TRI_DTYPE.itemsize == 48 and NODE4_DTYPE.itemsize == 128
 
 
@@ -62,6 +73,10 @@ class BVH:
     ----------
     vertices : float32 (n, 3)
     faces : int32 (m, 3)
+    preset : str, default "default"
+        a named set of the parameters below (:data:`PRESETS`: ``"default"``, or
+        ``"manta"`` for leaves of tens of triangles as in the paper's Manta); the
+        parameters given override it.
     max_leaf : int, default 8
         a node with more triangles is always split.
     bins : int, default 16
@@ -83,10 +98,13 @@ class BVH:
         triangles start at -child - 1)
     """
 
-    def __init__(self, vertices, faces, *, max_leaf=8, bins=16, traversal_cost=1.0):
-        self.max_leaf = integer("max_leaf", max_leaf, 1, 65535)
-        self.bins = integer("bins", bins, 1, 64)
-        self.traversal_cost = number("traversal_cost", traversal_cost, 0, 1000, lo_open=True)
+    def __init__(self, vertices, faces, *, preset="default", max_leaf=None, bins=None,
+                 traversal_cost=None):
+        params = self.check_parameters(preset=preset, max_leaf=max_leaf, bins=bins,
+                                       traversal_cost=traversal_cost)
+        self.preset = preset
+        self.max_leaf, self.bins = params["max_leaf"], params["bins"]
+        self.traversal_cost = params["traversal_cost"]
         vertices, faces = check_mesh(vertices, faces)
         n = len(faces)
         nodes = np.zeros(2 * n, dtype=NODE_DTYPE)
@@ -100,6 +118,23 @@ class BVH:
         self._update_bounds()
         self._wide = None
         self._wide_lock = threading.Lock()
+
+    @staticmethod
+    def check_parameters(preset="default", **given):
+        """The build parameters of ``preset`` with those ``given`` (not None) on top,
+        checked; ConfigError naming the preset or parameter otherwise."""
+        if not isinstance(preset, str) or preset not in PRESETS:
+            raise ConfigError(f"bvh: unknown preset {preset!r} (presets: "
+                              f"{', '.join(PRESETS)})")
+        unknown = sorted(set(given) - set(PRESETS[preset]))
+        if unknown:
+            raise ConfigError(f"bvh: unknown parameter {unknown[0]!r} (BVH takes: preset, "
+                              f"{', '.join(PRESETS[preset])})")
+        p = {**PRESETS[preset], **{k: v for k, v in given.items() if v is not None}}
+        return {"max_leaf": integer("max_leaf", p["max_leaf"], 1, 65535),
+                "bins": integer("bins", p["bins"], 1, 64),
+                "traversal_cost": number("traversal_cost", p["traversal_cost"], 0, 1000,
+                                         lo_open=True)}
 
     @property
     def wide(self):

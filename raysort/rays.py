@@ -233,8 +233,28 @@ class Packets:
         return self.rows.shape[1]
 
     @property
+    def origins(self):
+        """``(3, capacity)`` view of the origins."""
+        return self.rows[PACKET_ROWS.index("ox"):PACKET_ROWS.index("oz") + 1]
+
+    @property
+    def directions(self):
+        """``(3, capacity)`` view of the directions."""
+        return self.rows[PACKET_ROWS.index("dx"):PACKET_ROWS.index("dz") + 1]
+
+    @property
+    def tmin(self):
+        """``(capacity,)`` view of tmin."""
+        return self.rows[PACKET_ROWS.index("tmin")]
+
+    @property
     def t(self):
         return self.rows[10]
+
+    def active(self):
+        """A bool ``(capacity,)`` array, True on lanes a traversal must trace
+        (``tmin < t``)."""
+        return self.tmin < self.t
 
     def __repr__(self):
         return f"Packets(n_packets={self.n_packets}, rays={int(self.counts.sum())})"
