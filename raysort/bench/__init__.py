@@ -13,5 +13,6 @@ module            what it holds
 """
 from raysort.bench.command import PAPER_SCENES, add_parser, cmd_bench
 from raysort.bench.configs import Config, load_table
+from raysort.bench.report import machine_info
 
-__all__ = ["add_parser", "cmd_bench", "Config", "load_table", "PAPER_SCENES"]
+__all__ = ["add_parser", "cmd_bench", "Config", "load_table", "machine_info", "PAPER_SCENES"]

@@ -46,8 +46,8 @@ def add_parser(sub):
                    help="BVH build preset (default, manta) or parameters "
                         "'preset=manta,max_leaf=16'")
     b.add_argument("--sorters", type=_names, default=[],
-                   help="installed sorters, comma separated, or 'all'; with --traversals: "
-                        "the matrix of sorters x traversals")
+                   help="installed sorters, comma separated, or 'all'; with --traversals "
+                        "or --kernels: the matrix of sorters x traversals")
     b.add_argument("--traversals", type=_names, default=[],
                    help="installed traversals, comma separated, or 'all'")
     b.add_argument("--configs", action="append", default=[], metavar="FILE",
@@ -57,6 +57,8 @@ def add_parser(sub):
                    help="one more configuration, e.g. --add 'ranged + morton' ranged morton")
     b.add_argument("--only", type=_names, default=[],
                    help="run only these configuration labels, comma separated")
+    b.add_argument("--baseline", default=None, metavar="LABEL",
+                   help="take every speedup over this configuration")
     b.add_argument("--kernels", action="store_true",
                    help="time the traversal alone on the rays of each --workloads kind")
     b.add_argument("--workloads", type=_names, default=None,
@@ -90,15 +92,18 @@ def cmd_bench(args):
         if path:
             output.check_writable(path)
     table = load_table(args.configs, [tuple(a) for a in args.add])
-    if args.kernels:
-        if args.sorters:
-            raise ConfigError("--kernels takes its packet layouts from [kernels.packets] in "
-                              "configs.toml (or --configs), not --sorters")
+    if args.kernels and not args.sorters:
         configs = table.kernel_configs(args.traversals)
+    elif args.kernels:                   # the matrix of sorters x traversals, traversal only
+        configs = table.frame_configs(args.sorters, args.traversals or ["all"])
     else:
         configs = table.frame_configs(args.sorters, args.traversals)
     if args.only:
         configs = select(configs, args.only)
+    if args.baseline:
+        select(configs, [args.baseline])
+        for c in configs:
+            c.baseline = args.baseline
     if args.list:
         for c in configs:
             print(f"{c.label:28} traversal {c.traversal!s:28} sorter {c.sorter!s:36} "

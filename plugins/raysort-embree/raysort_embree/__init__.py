@@ -34,6 +34,7 @@ def _embree_scene(bvh):
 
 def _query(scene, o, d, far, any_hit):
     """(t, prim, u, v) from ``o`` (t relative to it, inf and -1 on a miss)."""
+    far = far.copy()                    # embreex writes the hit distances into it
     if any_hit:
         prim = (scene.run(o, d, dists=far, query="OCCLUDED") >= 0).astype(np.int32) - 1
         t = np.where(prim >= 0, np.float32(np.nan), np.float32(np.inf)).astype(np.float32)

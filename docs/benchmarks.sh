@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# Every number in BENCHMARKS.md comes from one of these commands (run from the
+# repository root, raysort installed with both yardsticks and the bench extra):
+#
+#   pip install ".[bench]" ./plugins/raysort-embree ./plugins/raysort-mitsuba
+#   bash docs/benchmarks.sh            # ~15 minutes on a shared 2-core VM
+#
+# Results land in docs/bench/ (JSON with every round, charts, text tables).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+out=docs/bench
+mkdir -p "$out"
+scenes="sibenik sponza forest"
+paper='ranged (8x8),partition (32x32),ranged + nah,partition + nah'
+run() {     # run NAME ARGS...: the table to NAME.txt (and the terminal), JSON to NAME.json
+    local name=$1; shift
+    echo "== raysort bench $*" | tee "$out/$name.txt"
+    raysort bench "$@" -q --json "$out/$name.json" | tee -a "$out/$name.txt"
+}
+uptime | tee "$out/load.txt"
+
+# 1. the paper's experiment (Fig. 2, Table I): every configuration, default BVH
+run frame $scenes --repeat 3 --chart "$out/frame.png"
+# 2. the paper's claim "ranged + sorting beats partition by 15 %": over partition
+run frame-over-partition $scenes --repeat 5 --only "$paper" --baseline "partition (32x32)"
+# 3. the same with Manta-like leaves (about ten triangle tests per box test)
+run manta $scenes --repeat 5 --bvh manta --only "$paper"
+run manta-over-partition $scenes --repeat 5 --bvh manta --only "$paper" \
+    --baseline "partition (32x32)"
+# 4. traversal alone: camera and first-bounce diffuse rays, 8x8 / 32x32 / nah
+#    packets, every installed traversal (yardsticks included), one thread
+run kernels sibenik --kernels --workloads primary,diffuse --repeat 5
+# 5. the matrix of sorters x traversals, first and second bounce and shadow rays
+run matrix sibenik --kernels --sorters all --traversals all \
+    --workloads diffuse,diffuse:depth=2,shadow --repeat 3 --chart "$out/matrix.png"
+# 6. peak memory of a 1024x1024 render on two threads
+python docs/peak_memory.py raysort render sibenik --size 1024x1024 --spp 4 --threads 2 \
+    --sorter nah --traversal partition -q | tee "$out/memory.txt"
+python docs/peak_memory.py raysort render sibenik --size 1024x1024 --spp 16 --threads 2 \
+    --sorter nah --traversal partition -q | tee -a "$out/memory.txt"
+uptime | tee -a "$out/load.txt"
