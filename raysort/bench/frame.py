@@ -92,7 +92,8 @@ def run_frames(scene_specs, configs, table, *, width=256, height=256, spp=4, dep
                 "counters": timed[0].closest_hit_counters(),
                 "stage_seconds": [st.stage_seconds for st in timed],
             })
-        group = group_report(configs, seconds, orders, rows)
+        group = group_report(configs, seconds, orders, rows,
+                             [tuple(pair) for pair in table.render.get("compare", [])])
         group.update(scene=scene.name, triangles=scene.n_triangles, bvh=built.stats())
         report["groups"][scene.name] = group
     report["load"]["after"] = load_average()

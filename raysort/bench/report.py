@@ -62,11 +62,18 @@ def load_average():
         return None
 
 
-def group_report(configs, seconds, orders, rows):
+def group_report(configs, seconds, orders, rows, compare=()):
     """One group's JSON: ``seconds[r][k]`` from :func:`raysort.bench.rounds.run_rounds`,
     ``rows[k]`` what configuration ``k`` measured besides time (``rays``, ``counters``
-    (a Counters), ``stage_seconds`` (one dict per round), checks)."""
+    (a Counters), ``stage_seconds`` (one dict per round), checks).  ``compare``: more
+    ``(label, over label)`` pairs whose per-round speedups are reported too."""
     labels = [c.label for c in configs]
+    comparisons = []
+    for a, b in compare:
+        if a in labels and b in labels:
+            r = ratios(seconds, labels.index(a), labels.index(b))
+            comparisons.append({"label": a, "over": b, "speedup_rounds": r,
+                                "speedup": summary(r)})
     out = []
     for k, (c, row) in enumerate(zip(configs, rows)):
         base = labels.index(c.baseline) if c.baseline in labels else 0
@@ -97,7 +104,8 @@ def group_report(configs, seconds, orders, rows):
         trav = stages.get("traverse") or (med["median"] if "sort_seconds" in entry else 0.0)
         entry["sort_share"] = sort / trav if trav else None
         out.append(entry)
-    return {"orders": [[labels[k] for k in order] for order in orders], "configs": out}
+    return {"orders": [[labels[k] for k in order] for order in orders], "configs": out,
+            "comparisons": comparisons}
 
 
 def failures(report):
@@ -158,6 +166,9 @@ def format_report(report, stream=None):
             say(f"  {r['label']:{width}} {_spread(r['seconds'], '{:.3f}'):>23} "
                 f"{r['mrays_per_second']:8.2f} {_spread(r['speedup'], '{:.2f}'):>20} "
                 f"{r['baseline'][:18]:>{min(width, 18)}} {share}  {_check(r)}")
+        for c in g.get("comparisons", []):
+            say(f"  {c['label']} over {c['over']}: {_spread(c['speedup'], '{:.2f}')}x "
+                f"(median of per-round ratios)")
         _format_counters(rows, say)
         if any(r["row"] for r in rows):
             _format_pivot(rows, say)

@@ -188,3 +188,16 @@ def test_kernels_matrix_of_sorters_and_traversals_per_workload(tmp_path, monkeyp
         assert rows["ranged + nah"]["baseline"] == "ranged + none"
         assert all(r["identical_hits"] for r in rows.values())
     assert rep["groups"]["cornell shadow:depth=0"]["any_hit"] is True
+
+
+def test_compared_pairs_are_per_round_ratios_too(tmp_path, monkeypatch, capsys):
+    status, rep = bench(tmp_path, monkeypatch, "plane", "--only",
+                        "ranged (8x8),partition (32x32),ranged + nah")
+    g = rep["groups"]["plane"]
+    rows = {r["label"]: r for r in g["configs"]}
+    (pair,) = [c for c in g["comparisons"] if c["label"] == "ranged + nah"]
+    assert pair["over"] == "partition (32x32)"
+    assert pair["speedup_rounds"] == pytest.approx(
+        [p / t for p, t in zip(rows["partition (32x32)"]["rounds"],
+                               rows["ranged + nah"]["rounds"])])
+    assert "ranged + nah over partition (32x32):" in capsys.readouterr().out
