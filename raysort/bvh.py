@@ -18,7 +18,7 @@ from raysort.mesh import check_mesh
 from raysort.params import integer, number
 from raysort.rays import aligned_empty
 
-__all__ = ["BVH", "NODE_DTYPE", "NODE4_DTYPE", "TRI_DTYPE", "prepare_triangles",
+__all__ = ["BVH", "PRESETS", "NODE_DTYPE", "NODE4_DTYPE", "TRI_DTYPE", "prepare_triangles",
            "degenerate_faces"]
 
 NODE_DTYPE = np.dtype([

@@ -261,7 +261,7 @@ def _bars(plt, report, groups):
         err = np.array([[m - r["seconds"]["min"], r["seconds"]["max"] - m]
                         for m, r in zip(med, rows)]).T
         ax.bar(np.arange(len(groups)) + k * width - 0.4 + width / 2, med, width,
-               yerr=err, capsize=2, label=label)
+               yerr=err, capsize=2, label=label, color=plt.cm.tab20(k % 20))
     ax.set_xticks(np.arange(len(groups)), groups)
     ax.set_ylabel("seconds per frame, median (lower is better)")
     s = report["settings"]
