@@ -11,15 +11,12 @@ all.
 from libc.stdlib cimport malloc, free, qsort
 from libc.stdint cimport int32_t
 from libc.math cimport INFINITY
-from raysort._types cimport rs_node, rs_node4, rs_tri, rs_minf, rs_maxf
+from raysort._types cimport rs_node, rs_node4, rs_tri, rs_minf, rs_maxf, RS_DEGENERATE_SIN2
 
 import numpy as np
 
-DEF MAX_BINS = 64
-# a triangle whose squared angle sine is at most this is degenerate (never hit)
-DEF DEGENERATE_SIN2 = 9.094947017729282e-13   # 2**-40
-
-DEGENERATE_SINE = 2.0 ** -20
+cdef enum:
+    MAX_BINS = 64
 
 
 cdef struct Box:
@@ -212,8 +209,8 @@ cdef void prepare_triangles(const float[:, ::1] vertices, const int32_t[:, ::1] 
 
     A degenerate triangle gets zero edges, so its determinant is exactly 0 and
     it is never hit: one whose area is below float32 precision, i.e.
-    |e1 x e2|^2 <= 2^-40 |e1|^2 |e2|^2 (the sine of its angle is at most
-    2^-20; exactly zero-area triangles included).  For such slivers the
+    |e1 x e2|^2 <= RS_DEGENERATE_SIN2 |e1|^2 |e2|^2 (types.h: the sine of its angle
+    is at most 2^-20; exactly zero-area triangles included).  For such slivers the
     Moller-Trumbore determinant is rounding noise and would report hits far
     from the triangle.  Computed in double from the float32 vertices.
     """
@@ -230,7 +227,7 @@ cdef void prepare_triangles(const float[:, ::1] vertices, const int32_t[:, ::1] 
         cx = e1[1] * e2[2] - e1[2] * e2[1]
         cy = e1[2] * e2[0] - e1[0] * e2[2]
         cz = e1[0] * e2[1] - e1[1] * e2[0]
-        flat = (cx * cx + cy * cy + cz * cz <= DEGENERATE_SIN2
+        flat = (cx * cx + cy * cy + cz * cz <= RS_DEGENERATE_SIN2
                 * (e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2])
                 * (e2[0] * e2[0] + e2[1] * e2[1] + e2[2] * e2[2]))
         for a in range(3):

@@ -14,6 +14,8 @@ int64 index arrays (the caller converts other integer types).
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.stdlib cimport calloc, free
 from libc.string cimport memset
+from raysort._types cimport (RS_RAY_OX, RS_RAY_OY, RS_RAY_OZ, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ,
+                             RS_RAY_TMIN, RS_RAY_TMAX, RS_RAY_ROWS, RS_PACKET_TMIN, RS_PACKET_T)
 
 import numpy as np
 
@@ -239,7 +241,7 @@ cdef int index_lanes_kernel(const int32_t *prim, const int32_t *index, const int
 def hits(const float[:, ::1] rows, const float[::1] t0, const int32_t[::1] prim,
          const float[::1] u, const float[::1] v, const int32_t[::1] index,
          const int32_t[::1] starts, const int32_t[::1] counts, const int32_t[::1] order,
-         const int32_t[::1] offsets, int64_t n_prim, bint any_hit, int tmin_row, int t_row):
+         const int32_t[::1] offsets, int64_t n_prim, bint any_hit):
     """A traversal's hits in gathered packets, ``t0`` being the row ``t`` before it ran
     (the ray's tmax; -inf on an invalid ray).  Every lane still holds the ray the gather
     put there (``order[offsets[k]:offsets[k + 1]]`` in sub-packet k; other lanes index and
@@ -253,8 +255,9 @@ def hits(const float[:, ::1] rows, const float[::1] t0, const int32_t[::1] prim,
                                   &order[0] if order.shape[0] else NULL, &offsets[0], capacity,
                                   &where)
         if not code:
-            code = lanes_kernel(&prim[0], &rows[tmin_row, 0], &rows[t_row, 0], &t0[0], &u[0],
-                                &v[0], capacity, <uint32_t> n_prim, any_hit, &where)
+            code = lanes_kernel(&prim[0], &rows[RS_PACKET_TMIN, 0], &rows[RS_PACKET_T, 0],
+                                &t0[0], &u[0], &v[0], capacity, <uint32_t> n_prim, any_hit,
+                                &where)
     return code, where
 
 
@@ -288,19 +291,16 @@ cdef int rays_kernel(const float *ox, const float *oy, const float *oz, const fl
     return 0
 
 
-def rays(const float[:, ::1] data, Py_ssize_t n, int origin_row, int direction_row,
-         int tmin_row, int tmax_row):
-    """Rays ``[0, n)`` of a batch: each one is either active (``tmin < tmax``) with
-    ``tmin >= 0`` and a finite origin and direction (three rows each, from ``origin_row``
-    and ``direction_row``), or marked invalid (``not tmin < tmax``), which the gather
-    stores inactive."""
+def rays(const float[:, ::1] data, Py_ssize_t n):
+    """Rays ``[0, n)`` of a batch (the ``RS_RAY_*`` rows): each one is either active
+    (``tmin < tmax``) with ``tmin >= 0`` and a finite origin and direction, or marked
+    invalid (``not tmin < tmax``), which the gather stores inactive."""
     cdef Py_ssize_t where = 0
     cdef int code
-    cdef int o = origin_row, d = direction_row
     with nogil:
-        code = rays_kernel(&data[o, 0], &data[o + 1, 0], &data[o + 2, 0], &data[d, 0],
-                           &data[d + 1, 0], &data[d + 2, 0], &data[tmin_row, 0],
-                           &data[tmax_row, 0], n, &where)
+        code = rays_kernel(&data[RS_RAY_OX, 0], &data[RS_RAY_OY, 0], &data[RS_RAY_OZ, 0],
+                           &data[RS_RAY_DX, 0], &data[RS_RAY_DY, 0], &data[RS_RAY_DZ, 0],
+                           &data[RS_RAY_TMIN, 0], &data[RS_RAY_TMAX, 0], n, &where)
     return code, where
 
 
@@ -389,11 +389,16 @@ def finite(x):
 # a shader's next paths and shadow rays, in one pass
 # ---------------------------------------------------------------------------
 
+cdef inline int row_ray_bad(const float *const *r, Py_ssize_t i) noexcept nogil:
+    """:func:`ray_bad` of ray ``i``, ``r`` pointing at the ``RS_RAY_*`` rows."""
+    return ray_bad(r[RS_RAY_OX][i], r[RS_RAY_OY][i], r[RS_RAY_OZ][i], r[RS_RAY_DX][i],
+                   r[RS_RAY_DY][i], r[RS_RAY_DZ][i], r[RS_RAY_TMIN][i], r[RS_RAY_TMAX][i])
+
+
 cdef inline int path_bad(const float *const *r, const int32_t *parent, const float *const *w,
-                         const int32_t *slot, Py_ssize_t i, uint32_t n, uint32_t slots,
-                         int tmin, int tmax) noexcept nogil:
-    cdef int bad = ray_bad(r[0][i], r[1][i], r[2][i], r[3][i], r[4][i], r[5][i], r[tmin][i],
-                           r[tmax][i])
+                         const int32_t *slot, Py_ssize_t i, uint32_t n,
+                         uint32_t slots) noexcept nogil:
+    cdef int bad = row_ray_bad(r, i)
     bad |= <uint32_t> parent[i] >= n
     bad |= (w[0][i] - w[0][i]) + (w[1][i] - w[1][i]) + (w[2][i] - w[2][i]) != 0
     if slot != NULL:
@@ -402,8 +407,8 @@ cdef inline int path_bad(const float *const *r, const int32_t *parent, const flo
 
 
 cdef int paths_kernel(const float *const *r, const int32_t *parent, const float *const *w,
-                      const int32_t *slot, Py_ssize_t m, uint32_t n, uint32_t slots, int tmin,
-                      int tmax, Py_ssize_t *where) noexcept nogil:
+                      const int32_t *slot, Py_ssize_t m, uint32_t n, uint32_t slots,
+                      Py_ssize_t *where) noexcept nogil:
     cdef Py_ssize_t a = 0, b, i
     cdef int bad
     while a < m:
@@ -411,23 +416,22 @@ cdef int paths_kernel(const float *const *r, const int32_t *parent, const float 
         bad = 0
         if slot == NULL:
             for i in range(a, b):
-                bad |= path_bad(r, parent, w, NULL, i, n, slots, tmin, tmax)
+                bad |= path_bad(r, parent, w, NULL, i, n, slots)
         else:
             for i in range(a, b):
-                bad |= path_bad(r, parent, w, slot, i, n, slots, tmin, tmax)
+                bad |= path_bad(r, parent, w, slot, i, n, slots)
         for i in range(a if a else 1, b):
             bad |= parent[i] < parent[i - 1]
         if bad:
             for i in range(a, b):
                 where[0] = i
-                if ray_bad(r[0][i], r[1][i], r[2][i], r[3][i], r[4][i], r[5][i], r[tmin][i],
-                           r[tmax][i]):
-                    return BAD_RAY if r[tmin][i] >= 0 else BAD_TMIN
+                if row_ray_bad(r, i):
+                    return BAD_RAY if r[RS_RAY_TMIN][i] >= 0 else BAD_TMIN
                 if <uint32_t> parent[i] >= n:
                     return BAD_PARENT_RANGE
                 if i and parent[i] < parent[i - 1]:
                     return BAD_PARENT_ORDER
-                if path_bad(r, parent, w, NULL, i, n, slots, tmin, tmax):
+                if path_bad(r, parent, w, NULL, i, n, slots):
                     return BAD_WEIGHT
                 if slot != NULL and <uint32_t> slot[i] >= slots:
                     return BAD_SLOT
@@ -436,15 +440,14 @@ cdef int paths_kernel(const float *const *r, const int32_t *parent, const float 
 
 
 def paths(const float[:, ::1] data, Py_ssize_t m, const int32_t[::1] parent,
-          const float[:, :] weight, slot, int64_t n, int64_t slots, int origin_row,
-          int direction_row, int tmin_row, int tmax_row):
+          const float[:, :] weight, slot, int64_t n, int64_t slots):
     """``m`` rays that continue paths (a shader's next bounce, or its shadow rays) in one
     pass: each ray finite or marked invalid (see :func:`rays`); ``parent`` ascending in
     ``[0, n)``; ``weight`` (3, m; rows contiguous) finite; ``slot`` (None, or int32)
     in ``[0, slots)``."""
     cdef Py_ssize_t where = 0
     cdef int code, c
-    cdef const float *r[8]
+    cdef const float *r[RS_RAY_ROWS]
     cdef const float *w[3]
     cdef const int32_t[::1] slot32
     cdef const int32_t *slot_ptr = NULL
@@ -452,15 +455,14 @@ def paths(const float[:, ::1] data, Py_ssize_t m, const int32_t[::1] parent,
         return 0, 0
     if weight.shape[0] != 3 or weight.shape[1] < m or weight.strides[1] != sizeof(float):
         raise ValueError("weight must be (3, m) with contiguous rows")
+    for c in range(RS_RAY_ROWS):
+        r[c] = &data[c, 0]
     for c in range(3):
-        r[c] = &data[origin_row + c, 0]
-        r[3 + c] = &data[direction_row + c, 0]
         w[c] = &weight[c, 0]
-    r[6], r[7] = &data[tmin_row, 0], &data[tmax_row, 0]
     if slot is not None:
         slot32 = slot
         slot_ptr = &slot32[0]
     with nogil:
         code = paths_kernel(r, &parent[0], w, slot_ptr, m, <uint32_t> n, <uint32_t> slots,
-                            6, 7, &where)      # r[6], r[7]: tmin, tmax
+                            &where)
     return code, where

@@ -7,20 +7,21 @@ direction on the way (``rs_gather4`` in simd.h).
 """
 from libc.stdint cimport int32_t
 from libc.math cimport INFINITY
-from raysort._types cimport rs_gather4, rs_isa_name
+from raysort._types cimport (rs_gather4, rs_isa_name, RS_RAY_ROWS, RS_PACKET_ROWS,
+                             RS_PACKET_T)
 
 
 def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1] offsets,
            const int32_t[::1] starts, float[:, ::1] dst, int32_t[::1] prim, float[::1] u,
            float[::1] v, int32_t[::1] index):
     cdef int n_packets = starts.shape[0], k, j, lane, count, base, s
-    cdef const float *src_rows[8]
-    cdef float *dst_rows[11]
+    cdef const float *src_rows[RS_RAY_ROWS]
+    cdef float *dst_rows[RS_PACKET_ROWS]
     cdef int32_t idx[4]
     cdef int c
-    for c in range(8):
+    for c in range(RS_RAY_ROWS):
         src_rows[c] = &src[c, 0]
-    for c in range(11):
+    for c in range(RS_PACKET_ROWS):
         dst_rows[c] = &dst[c, 0]
     with nogil:
         for k in range(n_packets):
@@ -54,7 +55,7 @@ def scatter(const float[:, ::1] rows, const int32_t[::1] prim, const float[::1] 
             if i < 0:
                 continue
             if prim[s] >= 0:
-                t_out[i] = rows[10, s]
+                t_out[i] = rows[RS_PACKET_T, s]
                 prim_out[i] = prim[s]
                 u_out[i] = u[s]
                 v_out[i] = v[s]

@@ -1,6 +1,7 @@
 """C-level layouts and kernels of raysort, for Cython modules to cimport.
 
-Declares the structs of ``raysort/include/raysort/types.h`` and the shared
+Declares the layout facts of ``raysort/include/raysort/types.h`` (their one owner:
+structs, row enums, limits) and the shared
 numeric kernels of ``raysort/include/raysort/simd.h`` (the one SIMD header).
 An outside plugin compiled with ``include_dirs=[raysort.get_include()]`` can
 ``from raysort._types cimport rs_rays, rs_box4`` and use exactly the arithmetic
@@ -13,6 +14,33 @@ ctypedef float float32_t
 
 cdef extern from "raysort/types.h" nogil:
     enum: RS_MAX_PACKET
+
+    # rs_ray_row and rs_packet_row, declared as plain ints to index memoryviews
+    enum:
+        RS_RAY_OX, RS_RAY_OY, RS_RAY_OZ
+        RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ
+        RS_RAY_TMIN, RS_RAY_TMAX
+        RS_RAY_ROWS
+
+    enum:
+        RS_PACKET_OX, RS_PACKET_OY, RS_PACKET_OZ
+        RS_PACKET_DX, RS_PACKET_DY, RS_PACKET_DZ
+        RS_PACKET_IX, RS_PACKET_IY, RS_PACKET_IZ
+        RS_PACKET_TMIN, RS_PACKET_T
+        RS_PACKET_ROWS
+
+    const char *const rs_ray_row_names[]
+    const char *const rs_packet_row_names[]
+
+    double RS_DEGENERATE_SIN2
+
+    enum:
+        RS_DIM_JITTER_X
+        RS_DIM_JITTER_Y
+        RS_DIM_BOUNCE
+        RS_DIMS_PER_BOUNCE
+        RS_MAX_DEPTH
+        RS_DIM_AO
 
     ctypedef struct rs_node:
         float lo[3]
@@ -74,21 +102,21 @@ cdef extern from "raysort/simd.h" nogil:
     float RS_BOX_SLACK
     int rs_tri1(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
     int rs_tri4(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
-    void rs_gather4(float *const dst[11], int32_t *prim, float *u, float *v, int j,
-                    const float *const src[8], const int32_t idx[4])
+    void rs_gather4(float *const dst[RS_PACKET_ROWS], int32_t *prim, float *u, float *v, int j,
+                    const float *const src[RS_RAY_ROWS], const int32_t idx[4])
 
 
 cdef inline rs_rays rays_view(float[:, ::1] rows, int32_t[::1] prim, float[::1] u,
                               float[::1] v):
-    """The C view of gathered packets: ``rows`` = ox oy oz dx dy dz ix iy iz tmin t."""
+    """The C view of gathered packets (``rows``: the ``RS_PACKET_*`` rows)."""
     cdef rs_rays r
     cdef int a
     for a in range(3):
-        r.o[a] = &rows[a, 0]
-        r.d[a] = &rows[3 + a, 0]
-        r.inv[a] = &rows[6 + a, 0]
-    r.tmin = &rows[9, 0]
-    r.t = &rows[10, 0]
+        r.o[a] = &rows[RS_PACKET_OX + a, 0]
+        r.d[a] = &rows[RS_PACKET_DX + a, 0]
+        r.inv[a] = &rows[RS_PACKET_IX + a, 0]
+    r.tmin = &rows[RS_PACKET_TMIN, 0]
+    r.t = &rows[RS_PACKET_T, 0]
     r.prim = &prim[0]
     r.u = &u[0]
     r.v = &v[0]

@@ -13,6 +13,7 @@ import threading
 import numpy as np
 
 from raysort import _bvh
+from raysort._layout import NODE4_DTYPE, NODE_DTYPE, TRI_DTYPE
 from raysort.errors import ConfigError
 from raysort.mesh import check_mesh
 from raysort.params import integer, number
@@ -21,18 +22,6 @@ from raysort.rays import aligned_empty
 __all__ = ["BVH", "PRESETS", "NODE_DTYPE", "NODE4_DTYPE", "TRI_DTYPE", "prepare_triangles",
            "degenerate_faces"]
 
-NODE_DTYPE = np.dtype([
-    ("lo", "<f4", (3,)), ("hi", "<f4", (3,)),
-    ("offset", "<i4"), ("count", "<u2"), ("axis", "u1"), ("flags", "u1"),
-])
-NODE4_DTYPE = np.dtype([
-    ("lo", "<f4", (3, 4)), ("hi", "<f4", (3, 4)),
-    ("child", "<i4", (4,)), ("count", "<u2", (4,)), ("pad", "<i4", (2,)),
-])
-TRI_DTYPE = np.dtype([
-    ("v0", "<f4", (3,)), ("e1", "<f4", (3,)), ("e2", "<f4", (3,)),
-    ("id", "<i4"), ("pad", "<i4", (2,)),
-])
 #: named sets of build parameters (``BVH(..., preset="manta")``, ``bvh={"preset": "manta"}``,
 #: ``raysort bench --bvh manta``); parameters given next to a preset override it.
 PRESETS = {
@@ -44,7 +33,6 @@ PRESETS = {
     # ~80 triangles per leaf on Sibenik and 10, 8.5 and 14 on its diffuse rays.
     "manta": {"max_leaf": 256, "bins": 16, "traversal_cost": 64.0},
 }
-assert NODE_DTYPE.itemsize == 32 and TRI_DTYPE.itemsize == 48 and NODE4_DTYPE.itemsize == 128
 
 
 def prepare_triangles(vertices, faces):

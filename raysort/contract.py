@@ -25,16 +25,16 @@ import numpy as np
 from raysort import _contract
 from raysort.errors import ConfigError, PluginContractError, PluginError
 from raysort.paths import Bounce, ShadowRays
-from raysort.rays import MAX_PACKET, MAX_RAYS, PACKET_ROWS, RAY_ROWS, RayBatch
+from raysort.rays import (MAX_PACKET, MAX_RAYS, PACKET_ROWS, RAY_ROWS, PacketRow, RayBatch,
+                          RayRow)
 from raysort.stats import Counters
 
 __all__ = ["check_packets", "check_ray_batch", "check_sort", "check_hits", "check_counters",
            "check_generated", "check_bounce", "call_plugin", "before_traversal", "plugin_error"]
 
 _BAD = _contract.Bad
-_TMIN, _TMAX = RAY_ROWS.index("tmin"), RAY_ROWS.index("tmax")
-_ORIGIN, _DIRECTION = RAY_ROWS.index("ox"), RAY_ROWS.index("dx")     # three rows each
-_LANE_TMIN, _LANE_T = PACKET_ROWS.index("tmin"), PACKET_ROWS.index("t")
+_TMIN, _ORIGIN, _DIRECTION = RayRow.tmin, RayRow.ox, RayRow.dx     # three rows each
+_LANE_TMIN, _LANE_T = PacketRow.tmin, PacketRow.t
 _PACKET_ARRAYS = ("rows", "prim", "u", "v", "index", "starts", "counts")
 _COUNTER_FIELDS = tuple(f.name for f in fields(Counters) if f.name != "available")
 _KIND_WORD = {"generators": "generator", "sorters": "sorter", "traversals": "traversal",
@@ -136,7 +136,7 @@ def _batch_layout(rays, label, fail):
 
 def _rays(rays, label, fail):
     """Every ray finite or marked invalid (``not tmin < tmax``)."""
-    code, i = _contract.rays(rays.data, len(rays), _ORIGIN, _DIRECTION, _TMIN, _TMAX)
+    code, i = _contract.rays(rays.data, len(rays))
     if code == _BAD.BAD_TMIN:
         fail(f"{label} ray {i} has tmin = {rays.data[_TMIN, i]} < 0 (mark an unused ray "
              f"invalid with tmin >= tmax)")
@@ -262,7 +262,7 @@ def check_hits(plugin, packets, before, order, offsets, n_prim, any_hit):
         fail("intersect() reshaped or retyped an array of the packets")
     rows, prim, u, v, index, starts, counts = arrays
     code, lane = _contract.hits(rows, t0, prim, u, v, index, starts, counts, order, offsets,
-                                n_prim, any_hit, _LANE_TMIN, _LANE_T)
+                                n_prim, any_hit)
     if code == _BAD.BAD_PADDING:
         fail(f"it wrote into padding lane {lane}, which holds no ray")
     if code == _BAD.BAD_LANE_INDEX:
@@ -348,8 +348,7 @@ def _paths(rays, parent, slot, weight, n, slots, label, weight_name, fail):
     parent = _int32(parent, f"{label}.parent", m, fail)
     slot = None if slot is None else _int32(slot, f"{label}.slot", m, fail)
     weight = _weights(weight, f"{label}.{weight_name}", m, fail)
-    code, i = _contract.paths(rays.data, m, parent, weight, slot, n, slots, _ORIGIN,
-                              _DIRECTION, _TMIN, _TMAX)
+    code, i = _contract.paths(rays.data, m, parent, weight, slot, n, slots)
     if code in (_BAD.BAD_TMIN, _BAD.BAD_RAY):
         _rays(rays, f"{label}.rays", fail)
     if code == _BAD.BAD_PARENT_RANGE:

@@ -49,16 +49,16 @@ def _module_name(isa, name):
     return f"raysort.{name}" if isa == baseline() else f"raysort._isa.{isa}.{name}"
 
 
-def _installed(module):
+def _built(isa):
     try:
-        return importlib.util.find_spec(module) is not None
-    except ModuleNotFoundError:         # no raysort._isa at all (RAYSORT_BUILD_ISAS=none)
+        return importlib.util.find_spec(_module_name(isa, _PROBE)) is not None
+    except ModuleNotFoundError:     # no raysort._isa at all (RAYSORT_BUILD_ISAS=none)
         return False
 
 
 def compiled():
     """The ISAs this installation holds kernels for, lowest first."""
-    return [isa for isa in ISAS if isa == baseline() or _installed(_module_name(isa, _PROBE))]
+    return [isa for isa in ISAS if isa == baseline() or _built(isa)]
 
 
 def supported():

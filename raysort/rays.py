@@ -25,14 +25,19 @@ import numbers
 import numpy as np
 
 from raysort import isa
+from raysort._layout import MAX_PACKET, PacketRow, RayRow
 from raysort.errors import ConfigError
 
-__all__ = ["RayBatch", "Packets", "Hits", "aligned_empty", "gather", "scatter", "scatter_occluded"]
+__all__ = ["RayBatch", "Packets", "Hits", "RayRow", "PacketRow", "MAX_PACKET", "aligned_empty",
+           "gather", "scatter", "scatter_occluded"]
 
-RAY_ROWS = ("ox", "oy", "oz", "dx", "dy", "dz", "tmin", "tmax")
-PACKET_ROWS = ("ox", "oy", "oz", "dx", "dy", "dz", "ix", "iy", "iz", "tmin", "t")
+#: row names of a ray batch and of gathered packets, in row order (types.h's enums)
+RAY_ROWS = tuple(row.name for row in RayRow)
+PACKET_ROWS = tuple(row.name for row in PacketRow)
 ALIGN = 16
-MAX_PACKET = 4096  # RS_MAX_PACKET in include/raysort/types.h
+_O, _D, _TMIN, _TMAX = int(RayRow.ox), int(RayRow.dx), int(RayRow.tmin), int(RayRow.tmax)
+_P_O, _P_D, _P_I = int(PacketRow.ox), int(PacketRow.dx), int(PacketRow.ix)
+_P_TMIN, _P_T = int(PacketRow.tmin), int(PacketRow.t)
 #: most rays in one batch: ray indices, offsets and packet boundaries are int32, and the
 #: capacity (rounded up to a multiple of 4) must fit too
 MAX_RAYS = 2**31 - 4
@@ -64,9 +69,9 @@ def aligned_empty(shape, dtype, align=ALIGN):
 
 
 class RayBatch:
-    """``n`` rays as float32 rows ``ox oy oz dx dy dz tmin tmax``.
+    """``n`` rays as float32 rows ``ox oy oz dx dy dz tmin tmax`` (:class:`RayRow`).
 
-    ``data`` has shape ``(8, capacity)``; lanes past ``n`` are padding and
+    ``data`` has shape ``(len(RayRow), capacity)``; lanes past ``n`` are padding and
     inactive.  The row views (``origins``, ``directions``, ``tmin``, ``tmax``)
     cover the first ``n`` lanes only.
 
@@ -84,10 +89,10 @@ class RayBatch:
         n = int(n)
         self.n = n
         self.prev_t = None
-        self.data = aligned_empty((8, max(_round4(n), 4)), np.float32)
+        self.data = aligned_empty((len(RAY_ROWS), max(_round4(n), 4)), np.float32)
         self.data[:] = 0.0
-        self.data[6, n:] = np.inf
-        self.data[7, n:] = -np.inf
+        self.data[_TMIN, n:] = np.inf
+        self.data[_TMAX, n:] = -np.inf
 
     @classmethod
     def from_arrays(cls, origins, directions, tmin=0.0, tmax=np.inf):
@@ -127,27 +132,29 @@ class RayBatch:
     @property
     def origins(self):
         """``(3, n)`` view of the origins."""
-        return self.data[0:3, :self.n]
+        return self.data[_O:_O + 3, :self.n]
 
     @property
     def directions(self):
         """``(3, n)`` view of the directions."""
-        return self.data[3:6, :self.n]
+        return self.data[_D:_D + 3, :self.n]
 
     @property
     def tmin(self):
-        return self.data[6, :self.n]
+        """``(n,)`` view of tmin: a hit needs ``t > tmin``."""
+        return self.data[_TMIN, :self.n]
 
     @property
     def tmax(self):
-        return self.data[7, :self.n]
+        """``(n,)`` view of tmax: a hit needs ``t < tmax``."""
+        return self.data[_TMAX, :self.n]
 
     def truncate(self, n):
         """Keep the first ``n`` rays (in place; the rest become inactive padding); returns self."""
         if not 0 <= n <= self.n:
             raise ValueError(f"cannot truncate {self.n} rays to {n}")
-        self.data[6, n:] = np.inf
-        self.data[7, n:] = -np.inf
+        self.data[_TMIN, n:] = np.inf
+        self.data[_TMAX, n:] = -np.inf
         self.n = int(n)
         if self.prev_t is not None:
             self.prev_t = self.prev_t[:n]
@@ -186,9 +193,11 @@ class Packets:
 
     Attributes
     ----------
-    rows : float32 (11, capacity)
-        ``ox oy oz dx dy dz ix iy iz tmin t``; ``t`` starts at the ray's tmax
-        and is lowered by the traversal as it finds closer hits.
+    rows : float32 (len(PacketRow), capacity)
+        ``ox oy oz dx dy dz ix iy iz tmin t`` (:class:`PacketRow`; also as the
+        views ``origins``, ``directions``, ``inverse_directions``, ``tmin``,
+        ``t``); ``t`` starts at the ray's tmax and is lowered by the traversal
+        as it finds closer hits.
     prim, u, v : (capacity,)
         hit record being built by the traversal (prim -1 = none yet).
     starts, counts : int32 (n_packets,)
@@ -235,26 +244,33 @@ class Packets:
     @property
     def origins(self):
         """``(3, capacity)`` view of the origins."""
-        return self.rows[PACKET_ROWS.index("ox"):PACKET_ROWS.index("oz") + 1]
+        return self.rows[_P_O:_P_O + 3]
 
     @property
     def directions(self):
         """``(3, capacity)`` view of the directions."""
-        return self.rows[PACKET_ROWS.index("dx"):PACKET_ROWS.index("dz") + 1]
+        return self.rows[_P_D:_P_D + 3]
+
+    @property
+    def inverse_directions(self):
+        """``(3, capacity)`` view of ``1 / direction`` (computed by the gather)."""
+        return self.rows[_P_I:_P_I + 3]
 
     @property
     def tmin(self):
-        """``(capacity,)`` view of tmin."""
-        return self.rows[PACKET_ROWS.index("tmin")]
+        """``(capacity,)`` view of tmin (+inf on an inactive lane)."""
+        return self.rows[_P_TMIN]
 
     @property
     def t(self):
-        return self.rows[10]
+        """``(capacity,)`` view of t: the ray's tmax, lowered to the closest hit found
+        (-inf on an inactive lane; an any-hit query sets -inf on a hit)."""
+        return self.rows[_P_T]
 
     def active(self):
         """A bool ``(capacity,)`` array, True on lanes a traversal must trace
         (``tmin < t``)."""
-        return self.tmin < self.t
+        return self.rows[_P_TMIN] < self.rows[_P_T]
 
     def __repr__(self):
         return f"Packets(n_packets={self.n_packets}, rays={int(self.counts.sum())})"

@@ -363,16 +363,16 @@ def test_an_any_hit_query_may_mark_hits_like_embree():
     """prim = 0 and t = -inf for every occluded ray (plugins/raysort-embree) is valid."""
     packets, before, order, offsets, n_prim = plane_trace(any_hit=True)
     hit = packets.prim >= 0
-    packets.prim[hit], packets.rows[10, hit] = 0, -np.inf
+    packets.prim[hit], packets.t[hit] = 0, -np.inf
     contract.check_hits("my_traversal", packets, before, order, offsets, n_prim, True)
 
 
 @pytest.mark.parametrize("corrupt, match", [
     (lambda p, hit: p.prim.__setitem__(hit, 2), "prim = 2 is neither -1"),
     (lambda p, hit: p.prim.__setitem__(hit, -2), "prim = -2"),
-    (lambda p, hit: p.rows[10].__setitem__(hit, np.nan), "outside the ray's interval"),
-    (lambda p, hit: p.rows[10].__setitem__(hit, -1.0), "outside the ray's interval"),
-    (lambda p, hit: p.rows[10].__setitem__(hit, np.inf), "outside the ray's interval"),
+    (lambda p, hit: p.t.__setitem__(hit, np.nan), "outside the ray's interval"),
+    (lambda p, hit: p.t.__setitem__(hit, -1.0), "outside the ray's interval"),
+    (lambda p, hit: p.t.__setitem__(hit, np.inf), "outside the ray's interval"),
     (lambda p, hit: p.v.__setitem__(hit, np.inf), "must be finite"),
     (lambda p, hit: p.prim.__setitem__(3, 0), "padding lane 3"),
     (lambda p, hit: p.index.__setitem__(3, 5), "padding lane 3"),
@@ -391,8 +391,8 @@ def test_broken_hits(corrupt, match):
 def test_a_hit_on_an_invalid_ray_is_broken():
     """An invalid ray (tmin = inf here) has an empty interval: no t can be a hit."""
     packets, before, order, offsets, n_prim = plane_trace()
-    lane = np.flatnonzero((packets.index >= 0) & (packets.rows[9] == np.inf))[0]
-    packets.prim[lane], packets.rows[10, lane] = 0, 1.0
+    lane = np.flatnonzero((packets.index >= 0) & (packets.tmin == np.inf))[0]
+    packets.prim[lane], packets.t[lane] = 0, 1.0
     assert "outside the ray's interval (inf" in hits_error(packets, before, order, offsets,
                                                            n_prim)
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from raysort.errors import ConfigError
-from raysort.rays import (MAX_PACKET, Hits, Packets, RayBatch, gather, scatter,
+from raysort.rays import (MAX_PACKET, Hits, Packets, RayBatch, RayRow, gather, scatter,
                           scatter_occluded)
 
 from _helpers import random_rays
@@ -88,11 +88,12 @@ def test_raybatch_layout(n):
     b = RayBatch(n)
     assert len(b) == n and b.n == n
     assert b.data.dtype == np.float32 and b.data.flags.c_contiguous
-    assert b.data.shape == (8, max(4, round4(n)))
-    for r in range(8):
-        assert_aligned(b.data[r], f"row {r}")
+    assert b.data.shape == (len(RayRow), max(4, round4(n)))
+    for r in RayRow:
+        assert_aligned(b.data[r], f"row {r.name}")
     assert (b.data[:, :n] == 0).all()
-    assert (b.data[6, n:] == np.inf).all() and (b.data[7, n:] == -np.inf).all()
+    assert ((b.data[RayRow.tmin, n:] == np.inf).all()
+            and (b.data[RayRow.tmax, n:] == -np.inf).all())
     assert b.origins.shape == (3, n) and b.directions.shape == (3, n)
     assert b.tmin.shape == (n,) and b.tmax.shape == (n,)
     if n:   # the row views write through to data
@@ -112,7 +113,8 @@ def test_from_arrays_values(rng):
     assert np.array_equal(bits(b.origins), bits(o.T.astype(np.float32)))
     assert np.array_equal(bits(b.directions), bits(d.T.astype(np.float32)))
     assert (b.tmin == 0).all() and (b.tmax == np.inf).all()
-    assert (b.data[6, 7:] == np.inf).all() and (b.data[7, 7:] == -np.inf).all()
+    assert ((b.data[RayRow.tmin, 7:] == np.inf).all()
+            and (b.data[RayRow.tmax, 7:] == -np.inf).all())
     tmin, tmax = np.linspace(0, 1, 7), np.linspace(2, 3, 7)
     b = RayBatch.from_arrays(o, d, tmin=tmin, tmax=tmax)
     assert np.array_equal(b.tmin, tmin.astype(np.float32))
@@ -141,9 +143,10 @@ def test_take(rng):
     out = src.take(idx)
     assert isinstance(out, RayBatch) and len(out) == 5
     assert np.array_equal(bits(out.data[:, :5]), bits(src.data[:, idx]))
-    assert out.data.shape == (8, 8)
-    assert (out.data[6, 5:] == np.inf).all() and (out.data[7, 5:] == -np.inf).all()
-    for r in range(8):
+    assert out.data.shape == (len(RayRow), 8)
+    assert ((out.data[RayRow.tmin, 5:] == np.inf).all()
+            and (out.data[RayRow.tmax, 5:] == -np.inf).all())
+    for r in RayRow:
         assert_aligned(out.data[r])
     assert not np.shares_memory(out.data, src.data)
     out.origins[:] = 42
@@ -159,7 +162,8 @@ def test_truncate(rng):
     assert b.truncate(6) is b
     assert len(b) == 6 and b.data is data
     assert np.array_equal(bits(b.data[:, :6]), bits(before[:, :6]))
-    assert (b.data[6, 6:] == np.inf).all() and (b.data[7, 6:] == -np.inf).all()
+    assert ((b.data[RayRow.tmin, 6:] == np.inf).all()
+            and (b.data[RayRow.tmax, 6:] == -np.inf).all())
     assert b.origins.shape == (3, 6)
     # the truncated rays are never gathered
     p = gather(b, np.arange(6, dtype=np.int32), np.array([0, 6], np.int32))
@@ -224,7 +228,7 @@ def test_gather_inverse_directions(gathered):
     d = rays.directions[:, packets.index[lanes]]
     want = np.float32(1) / d
     assert want.dtype == np.float32
-    assert np.array_equal(bits(packets.rows[6:9, lanes]), bits(want))
+    assert np.array_equal(bits(packets.inverse_directions[:, lanes]), bits(want))
 
 
 def test_gather_padding_inactive(gathered):
@@ -260,7 +264,8 @@ def test_gather_sizes(rng, sizes):
     check_alignment(p)
     check_inactive(p, np.flatnonzero(p.index == -1), "padding")
     lanes = np.flatnonzero(p.index >= 0)
-    assert np.array_equal(bits(p.rows[0:6, lanes]), bits(rays.data[0:6, p.index[lanes]]))
+    assert np.array_equal(bits(p.rows[:RayRow.tmin, lanes]),
+                          bits(rays.data[:RayRow.tmin, p.index[lanes]]))
 
 
 def special_rays():
@@ -315,17 +320,18 @@ def test_gather_invalid_rays_inactive(split):
     good = lane_of[valid]
     src = rays.data[:, :n][:, valid].copy()
     # subnormal direction components are stored as zeros of the same sign
-    d = src[3:6]
-    src[3:6] = np.where(np.abs(d) < np.finfo(np.float32).tiny, np.copysign(np.float32(0), d), d)
-    assert np.array_equal(bits(p.rows[0:6, good]), bits(src[0:6]))
-    assert np.array_equal(bits(p.rows[9, good]), bits(src[6]))
-    assert np.array_equal(bits(p.rows[10, good]), bits(src[7]))
+    d = src[RayRow.dx:RayRow.dz + 1]
+    src[RayRow.dx:RayRow.dz + 1] = np.where(np.abs(d) < np.finfo(np.float32).tiny,
+                                            np.copysign(np.float32(0), d), d)
+    assert np.array_equal(bits(p.rows[:RayRow.tmin, good]), bits(src[:RayRow.tmin]))
+    assert np.array_equal(bits(p.tmin[good]), bits(src[RayRow.tmin]))
+    assert np.array_equal(bits(p.t[good]), bits(src[RayRow.tmax]))
     with np.errstate(divide="ignore"):
-        inv = np.float32(1) / src[3:6]
-    assert np.array_equal(bits(p.rows[6:9, good]), bits(inv))
+        inv = np.float32(1) / src[RayRow.dx:RayRow.dz + 1]
+    assert np.array_equal(bits(p.inverse_directions[:, good]), bits(inv))
     assert inv[0, 1] == -np.inf                                  # spot check of the cases
-    sub = np.flatnonzero((np.abs(rays.data[3:6, :n][:, valid]) < np.finfo(np.float32).tiny)
-                         & (rays.data[3:6, :n][:, valid] != 0))
+    sub = np.flatnonzero((np.abs(rays.directions[:, valid]) < np.finfo(np.float32).tiny)
+                         & (rays.directions[:, valid] != 0))
     assert len(sub) > 0, "the special rays include subnormal direction components"
     assert not np.isnan(inv).any()
     # an invalid ray scatters back as a miss
@@ -344,7 +350,7 @@ def test_scatter_round_trip(gathered):
     ray = packets.index[lanes]
     hit = ray % 3 != 0
     t = (ray.astype(np.float32) * np.float32(0.37) + np.float32(0.5)).astype(np.float32)
-    packets.rows[10, lanes] = t
+    packets.t[lanes] = t
     packets.prim[lanes] = np.where(hit, ray * 7 + 1, -1)
     packets.u[lanes] = np.float32(0.25) + ray.astype(np.float32) * np.float32(1e-4)
     packets.v[lanes] = np.float32(0.125)

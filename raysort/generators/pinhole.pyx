@@ -2,6 +2,8 @@
 from libc.math cimport sqrt, INFINITY
 from libc.stdint cimport int32_t, uint32_t
 from raysort._rng cimport uniform
+from raysort._types cimport (RS_RAY_OX, RS_RAY_DX, RS_RAY_TMIN, RS_RAY_TMAX, RS_DIM_JITTER_X,
+                             RS_DIM_JITTER_Y)
 
 import math
 
@@ -10,10 +12,6 @@ import numpy as np
 from raysort.params import boolean
 from raysort.plugin import Generator
 from raysort.rays import RayBatch
-
-# random-number dimensions used by this generator
-DEF DIM_JITTER_X = 0
-DEF DIM_JITTER_Y = 1
 
 
 cdef void make_rays(const float[::1] eye, const float[::1] fwd, const float[::1] right,
@@ -28,8 +26,8 @@ cdef void make_rays(const float[::1] eye, const float[::1] fwd, const float[::1]
             i = s * n_pix + p
             x = pixels[p] % width
             y = pixels[p] // width
-            jx = uniform(seed, pixels[p], samples[s], DIM_JITTER_X) if jitter else 0.5
-            jy = uniform(seed, pixels[p], samples[s], DIM_JITTER_Y) if jitter else 0.5
+            jx = uniform(seed, pixels[p], samples[s], RS_DIM_JITTER_X) if jitter else 0.5
+            jy = uniform(seed, pixels[p], samples[s], RS_DIM_JITTER_Y) if jitter else 0.5
             # stratified within the pixel when spp is a square number
             jx = (stratum % strata + jx) / strata
             jy = (stratum // strata + jy) / strata
@@ -39,10 +37,10 @@ cdef void make_rays(const float[::1] eye, const float[::1] fwd, const float[::1]
                 d[a] = fwd[a] + sx * right[a] + sy * up[a]
             norm = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
             for a in range(3):
-                out[a, i] = eye[a]
-                out[3 + a, i] = d[a] / norm
-            out[6, i] = 0.0
-            out[7, i] = INFINITY
+                out[RS_RAY_OX + a, i] = eye[a]
+                out[RS_RAY_DX + a, i] = d[a] / norm
+            out[RS_RAY_TMIN, i] = 0.0
+            out[RS_RAY_TMAX, i] = INFINITY
 
 
 class PinholeGenerator(Generator):

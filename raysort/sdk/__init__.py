@@ -2,15 +2,18 @@
 
 A sorter, traversal, shader or generator, built in or from another package,
 imports from here (and, in Cython, cimports the C layouts of
-``raysort/_types.pxd`` built against :func:`get_include`)::
+``raysort/_types.pxd`` and the traversal driver of ``raysort/sdk/driver.pxd``,
+built against :func:`get_include`)::
 
     from raysort.sdk import Sorter, fixed_packets, integer
 
 * **base classes** of the four plugin kinds, and the containers they read and
   write (:class:`RayBatch`, :class:`Packets`, :class:`Hits`, :class:`Paths`,
   :class:`Bounce`, :class:`ShadowRays`, :class:`Counters`);
-* **packet helpers** (:func:`fixed_packets`) and layout limits
-  (:data:`MAX_PACKET`);
+* **packet helpers** (:func:`fixed_packets`), the row indices of ray batches
+  and gathered packets (:class:`RayRow`, :class:`PacketRow`; prefer the named
+  views such as ``packets.t``) and layout limits (:data:`MAX_PACKET`), all
+  derived from ``raysort/include/raysort/types.h``;
 * **parameter validators** (:func:`integer`, :func:`number`, :func:`boolean`,
   :func:`vector3`), which raise :class:`ConfigError` naming the parameter;
 * **contract checks** (:func:`check_sort`, :func:`check_hits` with
@@ -25,7 +28,7 @@ from raysort.errors import ConfigError, PluginContractError
 from raysort.params import boolean, integer, number, vector3
 from raysort.paths import Bounce, Paths, ShadowRays
 from raysort.plugin import Generator, Shader, Sorter, Traversal
-from raysort.rays import MAX_PACKET, Hits, Packets, RayBatch
+from raysort.rays import MAX_PACKET, Hits, PacketRow, Packets, RayBatch, RayRow
 from raysort.sdk.packets import fixed_packets
 from raysort.stats import Counters
 
@@ -40,7 +43,7 @@ def get_include():
 __all__ = [
     "Generator", "Sorter", "Traversal", "Shader",
     "RayBatch", "Packets", "Hits", "Paths", "Bounce", "ShadowRays", "Counters",
-    "MAX_PACKET", "fixed_packets",
+    "MAX_PACKET", "RayRow", "PacketRow", "fixed_packets",
     "integer", "number", "boolean", "vector3",
     "check_sort", "check_hits", "before_traversal", "check_counters", "check_generated",
     "check_bounce", "check_packets", "ConfigError", "PluginContractError", "get_include",

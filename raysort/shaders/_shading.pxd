@@ -7,6 +7,7 @@ compiled into each shader, so they cost no call, and every shader that uses them
 makes bit for bit the same rays.
 """
 from libc.math cimport sqrt, cos, sin, fabs, M_PI
+from raysort._types cimport RS_RAY_OX, RS_RAY_DX, RS_RAY_TMIN, RS_RAY_TMAX
 
 # How far a new origin is pushed off the surface: this fraction of (1 + the
 # largest coordinate of the hit point), enough to clear the float32 rounding
@@ -28,19 +29,19 @@ cdef inline float offset_scale(const float *p) noexcept nogil:
 cdef inline void leave_surface(const float[:, ::1] rays, const float[::1] t,
                                const float[:, ::1] normals, int i, int f, float *nrm,
                                float *o) noexcept nogil:
-    """Where ray ``i`` of a batch (rows ``ox oy oz dx dy dz ...``), which hit face ``f``
+    """Where ray ``i`` of a batch (the ``RS_RAY_*`` rows), which hit face ``f``
     at ``t[i]``, goes on: the face normal turned toward the incoming ray (``nrm``) and the
     hit point pushed off the surface along it (``o``)."""
     cdef float sgn = 0.0, p[3], eps
     cdef int a
     for a in range(3):
         nrm[a] = normals[f, a]
-        sgn = sgn + nrm[a] * rays[3 + a, i]
+        sgn = sgn + nrm[a] * rays[RS_RAY_DX + a, i]
     if sgn > 0:
         for a in range(3):
             nrm[a] = -nrm[a]
     for a in range(3):
-        p[a] = rays[a, i] + t[i] * rays[3 + a, i]
+        p[a] = rays[RS_RAY_OX + a, i] + t[i] * rays[RS_RAY_DX + a, i]
     eps = offset_scale(p)
     for a in range(3):
         o[a] = p[a] + eps * nrm[a]
@@ -51,10 +52,10 @@ cdef inline void store_ray(float[:, ::1] out, int k, const float *o, const float
     """Write ray ``k`` of a batch's rows: origin ``o``, direction ``w``, (0, ``tmax``)."""
     cdef int a
     for a in range(3):
-        out[a, k] = o[a]
-        out[3 + a, k] = w[a]
-    out[6, k] = 0.0
-    out[7, k] = tmax
+        out[RS_RAY_OX + a, k] = o[a]
+        out[RS_RAY_DX + a, k] = w[a]
+    out[RS_RAY_TMIN, k] = 0.0
+    out[RS_RAY_TMAX, k] = tmax
 
 
 cdef inline void cosine_direction(const float *nrm, float u1, float u2,

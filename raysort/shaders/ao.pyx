@@ -7,6 +7,7 @@ any-hit rays, cosine distributed around the surface normal, from every primary h
 """
 from libc.stdint cimport int32_t, uint32_t
 from raysort._rng cimport uniform
+from raysort._types cimport RS_DIM_AO
 from raysort.shaders._shading cimport leave_surface, cosine_direction, store_ray
 
 import numpy as np
@@ -16,13 +17,11 @@ from raysort.paths import Bounce, ShadowRays
 from raysort.plugin import Shader
 from raysort.rays import RayBatch
 
-# Random-number dimensions (raysort/_rng.pxd): the pinhole generator draws 0 and 1, lambert
-# 2 + 3 * depth + {0, 1, 2} for depth < max_depth <= 64, so at most 193.  AO ray k of a
-# path draws AO_DIM + 2k and AO_DIM + 2k + 1: a block of its own, [256, 256 + 2 * 256),
-# that no generator or shader of raysort shares.  The cap on samples also bounds
-# memory: a batch of n primary rays makes up to n * samples AO rays at once.
+# Random-number dimensions (the budget of types.h): AO ray k of a path draws RS_DIM_AO + 2k
+# and RS_DIM_AO + 2k + 1, a block of its own that no generator or bounce shares.  The cap
+# on samples also bounds memory: a batch of n primary rays makes up to n * samples AO
+# rays at once.
 cdef enum:
-    AO_DIM = 256
     MAX_SAMPLES = 256
 
 #: the scene's bounding-box diagonal times this is the default occlusion distance
@@ -46,8 +45,8 @@ cdef int ao_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::
             continue
         leave_surface(rays, t, normals, i, f, nrm, o)
         for k in range(samples):
-            cosine_direction(nrm, uniform(seed, pixel[i], sample[i], AO_DIM + 2 * k),
-                             uniform(seed, pixel[i], sample[i], AO_DIM + 2 * k + 1), w)
+            cosine_direction(nrm, uniform(seed, pixel[i], sample[i], RS_DIM_AO + 2 * k),
+                             uniform(seed, pixel[i], sample[i], RS_DIM_AO + 2 * k + 1), w)
             store_ray(ao_rays, m, o, w, distance)
             for c in range(3):
                 ao_weight[c, m] = thr[c, i] / samples

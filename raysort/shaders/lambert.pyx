@@ -2,6 +2,7 @@
 from libc.math cimport sqrt, M_PI, INFINITY
 from libc.stdint cimport int32_t, uint32_t
 from raysort._rng cimport uniform
+from raysort._types cimport RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH
 from raysort.shaders._shading cimport leave_surface, cosine_direction, store_ray
 
 import numpy as np
@@ -10,10 +11,6 @@ from raysort.params import boolean, integer
 from raysort.paths import Bounce, ShadowRays
 from raysort.plugin import Shader
 from raysort.rays import RayBatch
-
-# random-number dimensions: 2 + 3 per bounce, after the generator's two
-DEF DIM_BASE = 2
-DEF DIMS_PER_DEPTH = 3
 
 
 cdef struct ShadeParams:
@@ -36,7 +33,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                       float[:, ::1] sh_rays, int32_t[::1] sh_parent, int32_t[::1] sh_slot,
                       float[:, ::1] sh_contrib, int *n_next, int *n_shadow) noexcept nogil:
     cdef int n = prim.shape[0], i, f, a, c, k = 0, m = 0, L
-    cdef uint32_t dim = DIM_BASE + DIMS_PER_DEPTH * prm.depth
+    cdef uint32_t dim = RS_DIM_BOUNCE + RS_DIMS_PER_BOUNCE * prm.depth   # types.h's budget
     cdef float nrm[3], o[3], w[3], u1, u2, q
     cdef float cosl, dist2, dist, wl[3], best
     for i in range(n):
@@ -141,10 +138,10 @@ class LambertShader(Shader):
     trusted = True
 
     def __init__(self, *, max_depth=2, shadow_rays=None, russian_roulette=False, rr_depth=1):
-        self.max_depth = integer("max_depth", max_depth, 0, 64)
+        self.max_depth = integer("max_depth", max_depth, 0, RS_MAX_DEPTH)
         self.shadow_rays = boolean("shadow_rays", shadow_rays, allow_none=True)
         self.russian_roulette = boolean("russian_roulette", russian_roulette)
-        self.rr_depth = integer("rr_depth", rr_depth, 0, 64)
+        self.rr_depth = integer("rr_depth", rr_depth, 0, RS_MAX_DEPTH)
         self._prepared = None
 
     def prepare(self, scene):

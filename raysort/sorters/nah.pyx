@@ -17,15 +17,16 @@ inactive.
 """
 from libc.stdint cimport int32_t, uint8_t
 from libc.math cimport INFINITY, fabs
-from raysort._types cimport rs_minf, rs_maxf
+from raysort._types cimport rs_minf, rs_maxf, RS_RAY_OX, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ
 
 import numpy as np
 
 from raysort import isa
 from raysort.sdk import MAX_PACKET, ConfigError, Sorter, fixed_packets, integer, number
 
-DEF BUCKETS = 24
-DEF KEYS = 24 * 8
+cdef enum:
+    BUCKETS = 24            # direction buckets: octant x major axis
+    KEYS = BUCKETS * 8      # (bucket, origin-grid cell)
 
 
 cdef inline int direction_bucket(float dx, float dy, float dz) noexcept nogil:
@@ -71,7 +72,7 @@ cdef inline int grid_cell(const float[:, ::1] rays, int i, uint8_t axes,
     cdef int a, cell = 0, bit = 0
     for a in range(3):
         if axes >> a & 1:
-            if rays[a, i] >= mid[a]:
+            if rays[RS_RAY_OX + a, i] >= mid[a]:
                 cell |= 1 << bit
             bit += 1
     return cell
@@ -97,11 +98,11 @@ cdef int sort_packet(const float[:, ::1] rays, int start, int end, const float *
         count[k] = 0
     # pass 1: direction buckets (indices only) and per-bucket origin bounds
     for i in range(start, end):
-        b = direction_bucket(rays[3, i], rays[4, i], rays[5, i])
+        b = direction_bucket(rays[RS_RAY_DX, i], rays[RS_RAY_DY, i], rays[RS_RAY_DZ, i])
         key[i - start] = <uint8_t> b
         for a in range(3):
-            lo[b][a] = rs_minf(rays[a, i], lo[b][a])
-            hi[b][a] = rs_maxf(rays[a, i], hi[b][a])
+            lo[b][a] = rs_minf(rays[RS_RAY_OX + a, i], lo[b][a])
+            hi[b][a] = rs_maxf(rays[RS_RAY_OX + a, i], hi[b][a])
     for b in range(BUCKETS):
         split_axes(lo[b], hi[b], root_extent, threshold, max_axes, &axes[b], mid[b])
     # pass 2: origin-grid cell, then a counting sort on (bucket, cell)

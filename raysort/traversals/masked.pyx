@@ -6,7 +6,7 @@ mask the children inherit, and a node is entered if any lane hits.
 """
 from libc.stdint cimport int32_t, uint8_t
 from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box4, rs_tri4, rs_active4
-from raysort.traversals._common cimport (Geometry, Scratch, run, stack_root, stack_pop,
+from raysort.sdk.driver cimport (Kernel, Geometry, Scratch, run, stack_root, stack_pop,
                                          push_children, lowest_bit, left_first)
 
 from raysort import isa
@@ -17,18 +17,19 @@ cdef void trace_masked(const Geometry *g, rs_rays *r, int start, int count, int 
                        Scratch *w, rs_counters *counters) noexcept nogil:
     cdef rs_counters c = counters[0]    # a local copy stays in registers
     cdef int groups = (count + 3) // 4, sp, node, level, j, k, hits, lane
-    cdef int32_t *stack = w.stack
+    cdef int32_t *stack = <int32_t *> w.stack
+    cdef uint8_t *masks = <uint8_t *> w.level_group_data
     cdef uint8_t *parent
     cdef uint8_t *mask
     cdef const rs_node *n
     # level 0 holds the lanes active on entry; a node at level L reads the
     # masks of level L and writes its children's masks into level L + 1
     for j in range(groups):
-        w.masks[j] = <uint8_t> rs_active4(r, start + 4 * j)
+        masks[j] = <uint8_t> rs_active4(r, start + 4 * j)
     sp = stack_root(stack, 0)
     while sp > 0:
         n = stack_pop(g, stack, &sp, &node, &level)
-        parent = w.masks + level * groups
+        parent = masks + level * groups
         mask = parent + groups
         hits = 0
         for j in range(groups):
@@ -55,9 +56,13 @@ cdef void trace_masked(const Geometry *g, rs_rays *r, int start, int count, int 
     counters[0] = c
 
 
+# (node, level) pairs, and a lane mask per 4-ray group at each level
+cdef Kernel MASKED = Kernel(trace_masked, 2 * sizeof(int32_t), 0, sizeof(uint8_t))
+
+
 def trace(bvh, packets, bint any_hit):
     """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa)."""
-    return run(trace_masked, bvh, packets, any_hit)
+    return run(&MASKED, bvh, packets, any_hit)
 
 
 class MaskedTraversal(Traversal):

@@ -12,7 +12,7 @@ every test is a SIMD test.
 from libc.stdint cimport int32_t
 from raysort._types cimport (rs_node, rs_rays, rs_frustum, rs_counters, rs_box4, rs_tri4,
                              rs_ia_miss, rs_active4)
-from raysort.traversals._common cimport (Geometry, Scratch, run, stack_root, stack_pop,
+from raysort.sdk.driver cimport (Kernel, Geometry, Scratch, run, stack_root, stack_pop,
                                          push_children, lowest_bit, left_first, frustum_of)
 
 from raysort import isa
@@ -23,8 +23,8 @@ cdef void trace_partition(const Geometry *g, rs_rays *r, int start, int count, i
                           Scratch *w, rs_counters *counters) noexcept nogil:
     cdef rs_counters c = counters[0]    # a local copy stays in registers
     cdef int groups = (count + 3) // 4, sp, node, ie, live, j, k, m, m0, tmp
-    cdef int32_t *stack = w.stack
-    cdef int32_t *ids = w.ids
+    cdef int32_t *stack = <int32_t *> w.stack
+    cdef int32_t *ids = <int32_t *> w.group_data
     cdef const rs_node *n
     cdef rs_frustum f
     frustum_of(r, start, count, &f)
@@ -69,9 +69,13 @@ cdef void trace_partition(const Geometry *g, rs_rays *r, int start, int count, i
     counters[0] = c
 
 
+# (node, live groups) pairs, and the ids of the 4-ray groups
+cdef Kernel PARTITION = Kernel(trace_partition, 2 * sizeof(int32_t), sizeof(int32_t), 0)
+
+
 def trace(bvh, packets, bint any_hit):
     """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa)."""
-    return run(trace_partition, bvh, packets, any_hit)
+    return run(&PARTITION, bvh, packets, any_hit)
 
 
 class PartitionTraversal(Traversal):

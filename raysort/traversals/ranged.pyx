@@ -10,7 +10,7 @@ same way from the end and the triangles are tested on [first, last].
 from libc.stdint cimport int32_t
 from raysort._types cimport (rs_node, rs_rays, rs_frustum, rs_counters, rs_box1, rs_box4,
                              rs_ia_miss, rs_active4)
-from raysort.traversals._common cimport (Geometry, Scratch, run, stack_root, stack_pop,
+from raysort.sdk.driver cimport (Kernel, Geometry, Scratch, run, stack_root, stack_pop,
                                          push_children, active, align_up, align_down,
                                          lowest_bit, highest_bit, left_first, frustum_of,
                                          leaf_range)
@@ -99,7 +99,7 @@ cdef void trace_ranged(const Geometry *g, rs_rays *r, int start, int count, int 
                        Scratch *w, rs_counters *counters) noexcept nogil:
     cdef rs_counters c = counters[0]    # a local copy stays in registers
     cdef int end = start + count, sp = 0, node, first, last
-    cdef int32_t *stack = w.stack
+    cdef int32_t *stack = <int32_t *> w.stack
     cdef const rs_node *n
     cdef rs_frustum f
     frustum_of(r, start, count, &f)
@@ -118,9 +118,12 @@ cdef void trace_ranged(const Geometry *g, rs_rays *r, int start, int count, int 
     counters[0] = c
 
 
+cdef Kernel RANGED = Kernel(trace_ranged, 2 * sizeof(int32_t), 0, 0)   # (node, first) pairs
+
+
 def trace(bvh, packets, bint any_hit):
     """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa)."""
-    return run(trace_ranged, bvh, packets, any_hit)
+    return run(&RANGED, bvh, packets, any_hit)
 
 
 class RangedTraversal(Traversal):

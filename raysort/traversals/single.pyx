@@ -1,7 +1,7 @@
 """``single``: one ray at a time, the scalar reference traversal."""
 from libc.stdint cimport int32_t
 from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box1, rs_tri1, rs_prefetch
-from raysort.traversals._common cimport (Geometry, Scratch, run, active, left_first,
+from raysort.sdk.driver cimport (Kernel, Geometry, Scratch, run, active, left_first,
                                          prefetch_leaf, leaf_ray)
 
 from raysort import isa
@@ -13,7 +13,7 @@ cdef void trace_single(const Geometry *g, rs_rays *r, int start, int count, int 
     cdef rs_counters c = counters[0]    # a local copy stays in registers
     cdef int i, k, node, sp
     cdef const rs_node *n
-    cdef int32_t *stack = w.stack
+    cdef int32_t *stack = <int32_t *> w.stack
     for i in range(start, start + count):
         if not active(r, i):
             continue
@@ -44,9 +44,12 @@ cdef void trace_single(const Geometry *g, rs_rays *r, int start, int count, int 
     counters[0] = c
 
 
+cdef Kernel SINGLE = Kernel(trace_single, sizeof(int32_t), 0, 0)    # a stack of nodes
+
+
 def trace(bvh, packets, bint any_hit):
     """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa)."""
-    return run(trace_single, bvh, packets, any_hit)
+    return run(&SINGLE, bvh, packets, any_hit)
 
 
 class SingleTraversal(Traversal):

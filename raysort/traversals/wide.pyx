@@ -12,7 +12,7 @@ the hits equal brute force bit for bit.
 from libc.stdint cimport int32_t
 from raysort._types cimport (rs_node4, rs_rays, rs_counters, rs_tri1, rs_node4_hit,
                              rs_prefetch, RS_BOX_SLACK)
-from raysort.traversals._common cimport Geometry, Scratch, run, active, leaf_ray
+from raysort.sdk.driver cimport Kernel, Geometry, Scratch, run, active, leaf_ray
 
 from raysort import isa
 from raysort.plugin import Traversal
@@ -33,6 +33,7 @@ cdef void trace_wide(const Geometry *g, rs_rays *r, int start, int count, int an
     cdef float entry[4]
     cdef int i, k, j, m, mask, sp, ref, first
     cdef const rs_node4 *n
+    cdef const rs_node4 *nodes4 = <const rs_node4 *> g.tree   # BVH.wide
     for i in range(start, start + count):
         if not active(r, i):
             continue
@@ -40,7 +41,7 @@ cdef void trace_wide(const Geometry *g, rs_rays *r, int start, int count, int an
         ref = 0
         while True:
             if ref >= 0:
-                n = &g.nodes4[ref]
+                n = &nodes4[ref]
                 c.box4 += 1
                 mask = rs_node4_hit(r, i, n, entry)
                 # the children hit, nearest first (insertion sort of at most 4)
@@ -64,7 +65,7 @@ cdef void trace_wide(const Geometry *g, rs_rays *r, int start, int count, int an
                     ref = hit[0].ref
                     first = hit[0].count
                     if ref >= 0:
-                        rs_prefetch(&g.nodes4[ref])
+                        rs_prefetch(&nodes4[ref])
                     continue
             else:
                 leaf_ray(g, r, i, -ref - 1, first, any_hit, &c)
@@ -83,9 +84,13 @@ cdef void trace_wide(const Geometry *g, rs_rays *r, int start, int count, int an
     counters[0] = c
 
 
+# up to three waiting children per level of the 4-wide tree
+cdef Kernel WIDE = Kernel(trace_wide, 3 * sizeof(Entry), 0, 0)
+
+
 def trace(bvh, packets, bint any_hit):
     """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa)."""
-    return run(trace_wide, bvh, packets, any_hit, True)
+    return run(&WIDE, bvh, packets, any_hit, bvh.wide)
 
 
 class WideTraversal(Traversal):

@@ -122,7 +122,7 @@ def check_untouched(name, bvh, rays, order, offsets, any_hit):
     packets = gather(rays, order, offsets)
     before = {a: getattr(packets, a).copy() for a in ("rows", "prim", "u", "v", "index",
                                                       "starts", "counts")}
-    inactive = ~(packets.rows[9] < packets.rows[10])          # padding and invalid lanes
+    inactive = ~packets.active()          # padding and invalid lanes
     ray_data = rays.data.copy()
     raysort.create("traversals", name).intersect(bvh, packets, any_hit=any_hit)
     unchanged = np.array_equal(packets.rows[:10].view(np.uint32),
@@ -133,7 +133,7 @@ def check_untouched(name, bvh, rays, order, offsets, any_hit):
     for a in ("prim", "u", "v"):
         assert np.array_equal(getattr(packets, a)[inactive].view(np.uint32),
                               before[a][inactive].view(np.uint32)), f"{a} of an inactive lane"
-    assert np.array_equal(packets.rows[10][inactive].view(np.uint32),
+    assert np.array_equal(packets.t[inactive].view(np.uint32),
                           before["rows"][10][inactive].view(np.uint32)), "t of an inactive lane"
     assert np.array_equal(rays.data.view(np.uint32), ray_data.view(np.uint32))
     return packets
@@ -304,7 +304,7 @@ def test_packets_not_modified_beyond_hits(name, real):
     n = len(rays)
     mixed = rays.take(np.arange(n))
     mixed.tmin[::7] = np.inf                              # some invalid lanes too
-    mixed.data[3, 3::11] = np.nan
+    mixed.directions[0, 3::11] = np.nan
     for any_hit in (False, True):
         for size in (5, 64):
             check_untouched(name, bvh, mixed, rng.permutation(n).astype(np.int32),

@@ -315,7 +315,7 @@ def sib(sibenik, workloads):
     work = workloads(sibenik, "diffuse")
     rays = work.rays.take(np.arange(len(work.rays)))
     rays.tmin[5::97] = np.inf                             # invalid: tmin >= tmax
-    rays.data[0, 7::89] = np.nan                          # invalid: NaN origin
+    rays.origins[0, 7::89] = np.nan                          # invalid: NaN origin
     return bvh, work, rays
 
 

@@ -368,37 +368,40 @@ RS_INLINE int rs_tri4(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
 /* ------------------------------------------------------------------------ */
 /* src[0..7] are the rows ox oy oz dx dy dz tmin tmax of the source batch;
  * idx[k] < 0 marks a padding lane.  Writes lanes [j, j+4) of the packet rows
- * dst[0..10] = ox oy oz dx dy dz ix iy iz tmin t, with 4-wide stores (the
+ * dst[RS_PACKET_*] from the ray rows src[RS_RAY_*], with 4-wide stores (the
  * paper's temporary 4-ray packet), and resets prim/u/v.  A ray is stored
  * active only if its origin and direction are finite and 0 <= tmin < tmax;
  * otherwise (NaN rays, padding) it is stored inactive.  Subnormal direction
  * components are stored as zeros, so 1 / d is either finite or +-inf. */
-RS_INLINE void rs_gather4(float *const dst[11], int32_t *prim, float *u, float *v, int j,
-                          const float *const src[8], const int32_t idx[4])
+RS_INLINE void rs_gather4(float *const dst[RS_PACKET_ROWS], int32_t *prim, float *u, float *v,
+                          int j, const float *const src[RS_RAY_ROWS], const int32_t idx[4])
 {
-    float lane[8][4];
+    float lane[RS_RAY_ROWS][4];
     for (int k = 0; k < 4; ++k) {
         int32_t s = idx[k];
-        for (int c = 0; c < 8; ++c)
+        for (int c = 0; c < RS_RAY_ROWS; ++c)
             lane[c][k] = s >= 0 ? src[c][s] : 0.0f;
     }
     const rs_v4f zero = rs_set1(0.0f), inf = rs_set1(INFINITY);
     rs_v4m ok = rs_mask_from_bits((idx[0] >= 0) | (idx[1] >= 0) << 1 | (idx[2] >= 0) << 2 | (idx[3] >= 0) << 3);
-    rs_v4f row[8];
-    for (int c = 0; c < 8; ++c) {
+    rs_v4f row[RS_RAY_ROWS];
+    for (int c = 0; c < RS_RAY_ROWS; ++c)
         row[c] = rs_load(lane[c]);
-        if (c < 6)  /* finite: |x| < inf, false for NaN */
-            ok = rs_and(ok, rs_lt(rs_max(row[c], rs_sub(zero, row[c])), inf));
+    for (int a = 0; a < 3; ++a) {   /* finite: |x| < inf, false for NaN */
+        rs_v4f o = row[RS_RAY_OX + a], d = row[RS_RAY_DX + a];
+        ok = rs_and(ok, rs_lt(rs_max(o, rs_sub(zero, o)), inf));
+        ok = rs_and(ok, rs_lt(rs_max(d, rs_sub(zero, d)), inf));
     }
-    ok = rs_and(ok, rs_and(rs_ge(row[6], zero), rs_lt(row[6], row[7])));
-    for (int c = 0; c < 6; ++c) {
-        rs_v4f x = rs_blend(ok, c >= 3 ? rs_flush_subnormal(row[c]) : row[c], zero);
-        rs_store(dst[c] + j, x);
-        if (c >= 3)
-            rs_store(dst[c + 3] + j, rs_blend(ok, rs_div(rs_set1(1.0f), x), zero));
+    ok = rs_and(ok, rs_and(rs_ge(row[RS_RAY_TMIN], zero),
+                           rs_lt(row[RS_RAY_TMIN], row[RS_RAY_TMAX])));
+    for (int a = 0; a < 3; ++a) {
+        rs_v4f d = rs_blend(ok, rs_flush_subnormal(row[RS_RAY_DX + a]), zero);
+        rs_store(dst[RS_PACKET_OX + a] + j, rs_blend(ok, row[RS_RAY_OX + a], zero));
+        rs_store(dst[RS_PACKET_DX + a] + j, d);
+        rs_store(dst[RS_PACKET_IX + a] + j, rs_blend(ok, rs_div(rs_set1(1.0f), d), zero));
     }
-    rs_store(dst[9] + j, rs_blend(ok, row[6], inf));
-    rs_store(dst[10] + j, rs_blend(ok, row[7], rs_set1(-INFINITY)));
+    rs_store(dst[RS_PACKET_TMIN] + j, rs_blend(ok, row[RS_RAY_TMIN], inf));
+    rs_store(dst[RS_PACKET_T] + j, rs_blend(ok, row[RS_RAY_TMAX], rs_set1(-INFINITY)));
     rs_storei(prim + j, rs_set1i(-1));
     rs_store(u + j, zero);
     rs_store(v + j, zero);

@@ -1,8 +1,11 @@
-/* raysort: C-level data layouts shared by every kernel.
+/* raysort: the one owner of every data-layout fact.
  *
- * These structs are declared again in raysort/_types.pxd so that Cython
- * modules (ours and outside plugins) can use them, and mirrored by NumPy
- * structured dtypes in raysort/bvh.py.  Keep all three in step.
+ * The structs, the row order of ray batches and gathered packets, the widest
+ * packet, the degenerate-triangle threshold and the random-number dimension
+ * budget live here and nowhere else.  raysort/_types.pxd declares them for
+ * Cython (a field or row it gets wrong fails to compile or fails
+ * tests/test_layout.py); raysort/_layout.pyx derives the NumPy dtypes
+ * (NODE_DTYPE, NODE4_DTYPE, TRI_DTYPE) and the Python row indices from them.
  */
 #ifndef RAYSORT_TYPES_H
 #define RAYSORT_TYPES_H
@@ -12,6 +15,51 @@
 /* Widest sub-packet a traversal accepts (rays).  Large packets are 32x32 by
  * default; 64x64 tiles are the most the pipeline makes. */
 #define RS_MAX_PACKET 4096
+
+/* Rows of a ray batch (raysort.rays.RayBatch.data), one float32 row each. */
+typedef enum rs_ray_row {
+    RS_RAY_OX, RS_RAY_OY, RS_RAY_OZ,    /* origin */
+    RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ,    /* direction */
+    RS_RAY_TMIN, RS_RAY_TMAX,           /* the interval a hit must lie in */
+    RS_RAY_ROWS
+} rs_ray_row;
+
+/* Rows of gathered sub-packets (raysort.rays.Packets.rows), one float32 row
+ * each: the ray rows, the inverse direction, and `t`, which starts at the
+ * ray's tmax and shrinks as the traversal finds closer hits. */
+typedef enum rs_packet_row {
+    RS_PACKET_OX, RS_PACKET_OY, RS_PACKET_OZ,
+    RS_PACKET_DX, RS_PACKET_DY, RS_PACKET_DZ,
+    RS_PACKET_IX, RS_PACKET_IY, RS_PACKET_IZ,   /* 1 / direction */
+    RS_PACKET_TMIN, RS_PACKET_T,
+    RS_PACKET_ROWS
+} rs_packet_row;
+
+/* The rows' names, as Python sees them (raysort.rays.RayRow, PacketRow). */
+static const char *const rs_ray_row_names[RS_RAY_ROWS] = {
+    "ox", "oy", "oz", "dx", "dy", "dz", "tmin", "tmax"};
+static const char *const rs_packet_row_names[RS_PACKET_ROWS] = {
+    "ox", "oy", "oz", "dx", "dy", "dz", "ix", "iy", "iz", "tmin", "t"};
+
+/* A triangle is degenerate (kept, never hit) when the squared sine of its
+ * angle at the first vertex is at most this, 2^-40: |e1 x e2|^2 <=
+ * RS_DEGENERATE_SIN2 |e1|^2 |e2|^2, computed in double (raysort/_bvh.pyx). */
+#define RS_DEGENERATE_SIN2 9.094947017729282e-13
+
+/* The random-number dimensions of one (seed, pixel, sample) path
+ * (raysort/_rng.pxd): the generator's jitter draws the first two; a shader's
+ * bounce at depth d draws RS_DIMS_PER_BOUNCE from RS_DIM_BOUNCE +
+ * RS_DIMS_PER_BOUNCE * d (at most RS_MAX_DEPTH bounces, so they end below
+ * RS_DIM_AO); ambient occlusion draws its own block of two per sample from
+ * RS_DIM_AO. */
+enum {
+    RS_DIM_JITTER_X = 0,
+    RS_DIM_JITTER_Y = 1,
+    RS_DIM_BOUNCE = 2,
+    RS_DIMS_PER_BOUNCE = 3,
+    RS_MAX_DEPTH = 64,
+    RS_DIM_AO = 256
+};
 
 /* One node of the flat, depth-first binary BVH: 32 bytes.
  * Inner node (count == 0): the left child is the next node, the right child

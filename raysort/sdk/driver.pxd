@@ -1,28 +1,47 @@
-"""Scaffolding shared by every traversal kernel (see _common.pyx).
+"""The traversal driver of raysort's plugin SDK, for Cython traversal kernels.
 
-A traversal module implements one ``packet_fn`` that traces one sub-packet
-and hands it to :func:`run`, which loops over the sub-packets without the GIL,
-owns the scratch memory and collects the counters.  The inline helpers below
-(activity tests, the packet frustum, leaf intersection with DynBVH's
+A kernel is one ``packet_fn`` that traces one sub-packet, described by a
+:c:type:`Kernel` that also declares the scratch memory it needs.  Its module
+hands that to :func:`run`, which checks the packets, loops over the
+sub-packets without the GIL, owns the scratch memory (allocated once per call)
+and sums the Table I counters::
+
+    from raysort.sdk.driver cimport Kernel, Geometry, Scratch, run, active
+
+    cdef void trace_mine(const Geometry *g, rs_rays *r, int start, int count,
+                         int any_hit, Scratch *w, rs_counters *c) noexcept nogil:
+        cdef int32_t *stack = <int32_t *> w.stack     # w.levels entries of 4 bytes
+        ...
+
+    cdef Kernel MINE = Kernel(trace_mine, sizeof(int32_t), 0, 0)
+
+    def trace(bvh, packets, bint any_hit):
+        return run(&MINE, bvh, packets, any_hit)
+
+A kernel that walks another tree than the binary BVH (the 4-wide ``BVH.wide``,
+or a structure of its own) passes its arrays as ``tree`` and ``leaves`` and
+reads them from :c:type:`Geometry`.  The inline helpers below (activity tests,
+the packet frustum, (node, value) stacks, leaf intersection with DynBVH's
 head/SIMD/tail rule, child order) are compiled into each kernel, so they cost
 no call.
 """
-from libc.stdint cimport int32_t, uint8_t
-from raysort._types cimport (rs_node, rs_node4, rs_tri, rs_rays, rs_frustum, rs_counters,
+from libc.stdint cimport int32_t
+from raysort._types cimport (rs_node, rs_tri, rs_rays, rs_frustum, rs_counters,
                              rs_tri1, rs_tri4, rs_active4, rs_minf, rs_maxf, rs_prefetch)
 
 
 cdef struct Geometry:
-    const rs_node *nodes    # flat depth-first BVH
-    const rs_tri *tris      # triangles in BVH order
-    const rs_node4 *nodes4  # the BVH collapsed to 4-wide nodes (NULL unless asked for)
+    const rs_node *nodes    # the binary BVH, flat depth first
+    const rs_tri *tris      # its triangles in BVH order
+    const void *tree        # the node array passed to run() as ``tree`` (NULL if none)
+    const void *leaves      # the array passed to run() as ``leaves`` (NULL if none)
 
 
 cdef struct Scratch:
-    int32_t *stack          # 12 * stack_size ints: (node, int) pairs, or wider entries
-    int stack_size          # BVH depth + 2
-    uint8_t *masks          # stack_size * groups lane masks (masked traversal)
-    int32_t *ids            # groups ids (partition traversal)
+    void *stack             # levels * Kernel.stack_bytes
+    void *group_data        # groups * Kernel.group_bytes
+    void *level_group_data  # levels * groups * Kernel.level_group_bytes
+    int levels              # the binary BVH's depth + 2 (a bound for any stack per level)
     int groups              # 4-ray groups of the widest sub-packet
 
 
@@ -31,7 +50,15 @@ ctypedef void (*packet_fn)(const Geometry *g, rs_rays *r, int start, int count,
                            int any_hit, Scratch *w, rs_counters *c) noexcept nogil
 
 
-cdef object run(packet_fn fn, object bvh, object packets, bint any_hit, bint wide=*)
+cdef struct Kernel:
+    packet_fn trace             # traces one sub-packet
+    size_t stack_bytes          # scratch bytes per level: a stack's entries pushed per level
+    size_t group_bytes          # scratch bytes per 4-ray group (e.g. group ids)
+    size_t level_group_bytes    # scratch bytes per level and 4-ray group (e.g. lane masks)
+
+
+cdef object run(const Kernel *kernel, object bvh, object packets, bint any_hit,
+                object tree=*, object leaves=*)
 
 
 cdef inline bint active(const rs_rays *r, int i) noexcept nogil:

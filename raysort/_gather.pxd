@@ -1,1 +1,0 @@
-"""Gather and scatter kernels; see _gather.pyx."""

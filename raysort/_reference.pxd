@@ -1,1 +1,0 @@
-"""Brute-force reference kernel; see _reference.pyx."""

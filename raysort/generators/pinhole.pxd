@@ -1,1 +1,0 @@
-"""The pinhole generator; see pinhole.pyx."""

@@ -1,1 +1,0 @@
-"""The lambert shader; see lambert.pyx."""

@@ -1,1 +1,0 @@
-"""The nah sorter; see nah.pyx."""
