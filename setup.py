@@ -38,6 +38,7 @@ ISA_MODULES = [
     "traversals.ranged",
     "traversals.partition",
     "traversals.wide",
+    "traversals.stream",
 ]
 
 

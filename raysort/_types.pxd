@@ -87,6 +87,8 @@ cdef extern from "raysort/types.h" nogil:
         int64_t box4
         int64_t tri1
         int64_t tri4
+        int64_t stream_tasks
+        int64_t stream_rays
 
 
 cdef extern from "raysort/simd.h" nogil:

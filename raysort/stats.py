@@ -22,6 +22,9 @@ class Counters:
     ``rays`` is the number of (active) rays submitted; a SIMD test is one
     4-wide test whatever its active lanes.  ``available`` is False for
     traversals that cannot count (e.g. an external library).
+    ``stream_tasks`` and ``stream_rays`` count the streams of rays a stream
+    traversal visited nodes with and the rays they held (0 for the others):
+    ``stream_rays / stream_tasks`` is the mean stream size.
     """
 
     rays: int = 0
@@ -30,6 +33,8 @@ class Counters:
     box4: int = 0
     tri1: int = 0
     tri4: int = 0
+    stream_tasks: int = 0
+    stream_rays: int = 0
     available: bool = True
 
     def __add__(self, other):

@@ -130,6 +130,8 @@ typedef struct rs_counters {
     int64_t box4;       /* 4-wide SIMD ray-box tests */
     int64_t tri1;       /* scalar ray-triangle tests */
     int64_t tri4;       /* 4-wide SIMD ray-triangle tests */
+    int64_t stream_tasks;   /* streams of rays popped at a node (stream traversal) */
+    int64_t stream_rays;    /* rays those streams held */
 } rs_counters;
 
 #endif

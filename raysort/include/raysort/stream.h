@@ -1,0 +1,604 @@
+/* raysort: the ray-stream traversal kernel (Barringer & Akenine-Moller 2014).
+ *
+ * A stream of ray ids (lanes of a gathered rs_rays batch) descends the 4-wide
+ * BVH (rs_node4) together.  At each node the stream is filtered into one
+ * sub-stream per child: the ids of the rays whose slab test hits that child's
+ * box, RS_SW rays per SIMD test (16 on AVX-512, 8 on AVX2, 4 on SSE2, 1 on the
+ * scalar build).  The sub-streams go on a task stack, nearest child (by the
+ * stream's majority) on top.  A leaf tests the rays of its stream against its
+ * triangles, RS_SW rays at a time.  Streams smaller than a threshold finish
+ * one ray at a time from their node, as bepu's RayBatcher does.
+ *
+ * Exactness: each lane performs rs_node4_hit's slab arithmetic on one child box
+ * and rs_tri1's Moller-Trumbore arithmetic on one triangle, in the same order
+ * (simd.h; -ffp-contract=off), and a box test uses the ray's current t, which
+ * only ever shrinks to a hit brute force accepts.  So a ray meets every box
+ * that holds its closest hit, and t, prim, u, v equal brute force bit for bit.
+ */
+#ifndef RAYSORT_STREAM_H
+#define RAYSORT_STREAM_H
+
+#include <stdlib.h>
+#include "simd.h"
+
+/* Set bits of a lane mask, and the lowest one's index (bits != 0). */
+RS_INLINE int rs_popcount(int bits)
+{
+#if defined(__GNUC__) || defined(__clang__)
+    return __builtin_popcount((unsigned)bits);
+#else
+    int n = 0;
+    for (; bits; bits &= bits - 1) ++n;
+    return n;
+#endif
+}
+RS_INLINE int rs_lowest(int bits)
+{
+#if defined(__GNUC__) || defined(__clang__)
+    return __builtin_ctz((unsigned)bits);
+#else
+    int k = 0;
+    while (!(bits >> k & 1)) ++k;
+    return k;
+#endif
+}
+
+/* ------------------------------------------------------------------------ */
+/* RS_SW-lane vocabulary over rays gathered by id                           */
+/* ------------------------------------------------------------------------ */
+/* sw_gather loads one row of rs_rays for the RS_SW ids of a group; the other
+ * operations are those of simd.h's 4-lane vocabulary, with the same operand
+ * semantics (min/max return the second operand when either is NaN; != is true
+ * for NaN). */
+#if RS_ISA_AVX512
+#  define RS_SW 16
+typedef __m512 rs_swf;
+typedef __mmask16 rs_swm;
+typedef __m512i rs_swi;
+RS_INLINE rs_swi sw_ids(const int32_t *p) { return _mm512_loadu_si512((const void *)p); }
+RS_INLINE rs_swf sw_gather(const float *base, rs_swi id) { return _mm512_i32gather_ps(id, base, 4); }
+RS_INLINE rs_swi sw_gatheri(const int32_t *base, rs_swi id)
+{ return _mm512_i32gather_epi32(id, base, 4); }
+RS_INLINE rs_swf sw_set1(float a) { return _mm512_set1_ps(a); }
+RS_INLINE rs_swi sw_set1i(int32_t a) { return _mm512_set1_epi32(a); }
+RS_INLINE rs_swf sw_add(rs_swf a, rs_swf b) { return _mm512_add_ps(a, b); }
+RS_INLINE rs_swf sw_sub(rs_swf a, rs_swf b) { return _mm512_sub_ps(a, b); }
+RS_INLINE rs_swf sw_mul(rs_swf a, rs_swf b) { return _mm512_mul_ps(a, b); }
+RS_INLINE rs_swf sw_div(rs_swf a, rs_swf b) { return _mm512_div_ps(a, b); }
+RS_INLINE rs_swf sw_min(rs_swf a, rs_swf b) { return _mm512_min_ps(a, b); }
+RS_INLINE rs_swf sw_max(rs_swf a, rs_swf b) { return _mm512_max_ps(a, b); }
+RS_INLINE rs_swm sw_lt(rs_swf a, rs_swf b) { return _mm512_cmp_ps_mask(a, b, _CMP_LT_OQ); }
+RS_INLINE rs_swm sw_le(rs_swf a, rs_swf b) { return _mm512_cmp_ps_mask(a, b, _CMP_LE_OQ); }
+RS_INLINE rs_swm sw_gt(rs_swf a, rs_swf b) { return _mm512_cmp_ps_mask(a, b, _CMP_GT_OQ); }
+RS_INLINE rs_swm sw_ge(rs_swf a, rs_swf b) { return _mm512_cmp_ps_mask(a, b, _CMP_GE_OQ); }
+RS_INLINE rs_swm sw_eq(rs_swf a, rs_swf b) { return _mm512_cmp_ps_mask(a, b, _CMP_EQ_OQ); }
+RS_INLINE rs_swm sw_ne(rs_swf a, rs_swf b) { return _mm512_cmp_ps_mask(a, b, _CMP_NEQ_UQ); }
+RS_INLINE rs_swm sw_lti(rs_swi a, rs_swi b) { return _mm512_cmplt_epi32_mask(a, b); }
+RS_INLINE rs_swm sw_and(rs_swm a, rs_swm b) { return a & b; }
+RS_INLINE rs_swm sw_or(rs_swm a, rs_swm b) { return a | b; }
+RS_INLINE int sw_bits(rs_swm m) { return (int)m; }
+RS_INLINE rs_swm sw_from_bits(int bits) { return (rs_swm)bits; }
+RS_INLINE rs_swm sw_sign(rs_swf a) { return _mm512_movepi32_mask(_mm512_castps_si512(a)); }
+RS_INLINE rs_swf sw_blend(rs_swm m, rs_swf a, rs_swf b) { return _mm512_mask_blend_ps(m, b, a); }
+RS_INLINE rs_swi sw_blendi(rs_swm m, rs_swi a, rs_swi b) { return _mm512_mask_blend_epi32(m, b, a); }
+RS_INLINE void sw_store(float *p, rs_swf a) { _mm512_storeu_ps(p, a); }
+RS_INLINE void sw_storei(int32_t *p, rs_swi a) { _mm512_storeu_si512((void *)p, a); }
+/* Append the ids of the lanes in `bits` to out[*n] (out has RS_SW slots of slack). */
+RS_INLINE void sw_append(int32_t *out, int *n, rs_swi id, int bits)
+{
+    _mm512_storeu_si512((void *)(out + *n), _mm512_maskz_compress_epi32((__mmask16)bits, id));
+    *n += rs_popcount(bits);
+}
+#elif RS_ISA_AVX2
+#  define RS_SW 8
+typedef __m256 rs_swf;
+typedef __m256 rs_swm;
+typedef __m256i rs_swi;
+RS_INLINE rs_swi sw_ids(const int32_t *p) { return _mm256_loadu_si256((const __m256i *)p); }
+RS_INLINE rs_swf sw_gather(const float *base, rs_swi id) { return _mm256_i32gather_ps(base, id, 4); }
+RS_INLINE rs_swi sw_gatheri(const int32_t *base, rs_swi id)
+{ return _mm256_i32gather_epi32((const int *)base, id, 4); }
+RS_INLINE rs_swf sw_set1(float a) { return _mm256_set1_ps(a); }
+RS_INLINE rs_swi sw_set1i(int32_t a) { return _mm256_set1_epi32(a); }
+RS_INLINE rs_swf sw_add(rs_swf a, rs_swf b) { return _mm256_add_ps(a, b); }
+RS_INLINE rs_swf sw_sub(rs_swf a, rs_swf b) { return _mm256_sub_ps(a, b); }
+RS_INLINE rs_swf sw_mul(rs_swf a, rs_swf b) { return _mm256_mul_ps(a, b); }
+RS_INLINE rs_swf sw_div(rs_swf a, rs_swf b) { return _mm256_div_ps(a, b); }
+RS_INLINE rs_swf sw_min(rs_swf a, rs_swf b) { return _mm256_min_ps(a, b); }
+RS_INLINE rs_swf sw_max(rs_swf a, rs_swf b) { return _mm256_max_ps(a, b); }
+RS_INLINE rs_swm sw_lt(rs_swf a, rs_swf b) { return _mm256_cmp_ps(a, b, _CMP_LT_OQ); }
+RS_INLINE rs_swm sw_le(rs_swf a, rs_swf b) { return _mm256_cmp_ps(a, b, _CMP_LE_OQ); }
+RS_INLINE rs_swm sw_gt(rs_swf a, rs_swf b) { return _mm256_cmp_ps(a, b, _CMP_GT_OQ); }
+RS_INLINE rs_swm sw_ge(rs_swf a, rs_swf b) { return _mm256_cmp_ps(a, b, _CMP_GE_OQ); }
+RS_INLINE rs_swm sw_eq(rs_swf a, rs_swf b) { return _mm256_cmp_ps(a, b, _CMP_EQ_OQ); }
+RS_INLINE rs_swm sw_ne(rs_swf a, rs_swf b) { return _mm256_cmp_ps(a, b, _CMP_NEQ_UQ); }
+RS_INLINE rs_swm sw_lti(rs_swi a, rs_swi b) { return _mm256_castsi256_ps(_mm256_cmpgt_epi32(b, a)); }
+RS_INLINE rs_swm sw_and(rs_swm a, rs_swm b) { return _mm256_and_ps(a, b); }
+RS_INLINE rs_swm sw_or(rs_swm a, rs_swm b) { return _mm256_or_ps(a, b); }
+RS_INLINE int sw_bits(rs_swm m) { return _mm256_movemask_ps(m); }
+RS_INLINE rs_swm sw_from_bits(int bits)
+{
+    const __m256i lanes = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+    __m256i b = _mm256_and_si256(_mm256_set1_epi32(bits), lanes);
+    return _mm256_castsi256_ps(_mm256_cmpeq_epi32(b, lanes));
+}
+RS_INLINE rs_swm sw_sign(rs_swf a)
+{ return _mm256_castsi256_ps(_mm256_srai_epi32(_mm256_castps_si256(a), 31)); }
+RS_INLINE rs_swf sw_blend(rs_swm m, rs_swf a, rs_swf b) { return _mm256_blendv_ps(b, a, m); }
+RS_INLINE rs_swi sw_blendi(rs_swm m, rs_swi a, rs_swi b)
+{
+    return _mm256_castps_si256(_mm256_blendv_ps(_mm256_castsi256_ps(b), _mm256_castsi256_ps(a), m));
+}
+RS_INLINE void sw_store(float *p, rs_swf a) { _mm256_storeu_ps(p, a); }
+RS_INLINE void sw_storei(int32_t *p, rs_swi a) { _mm256_storeu_si256((__m256i *)p, a); }
+#else
+/* SSE2 (4 lanes, simd.h's vocabulary) and the scalar build (1 lane). */
+#  if RS_SSE
+#    define RS_SW 4
+typedef rs_v4f rs_swf;
+typedef rs_v4m rs_swm;
+#  else
+#    define RS_SW 1
+typedef float rs_swf;
+typedef int rs_swm;
+#  endif
+typedef struct { int32_t i[RS_SW]; } rs_swi;
+RS_INLINE rs_swi sw_ids(const int32_t *p) { rs_swi r; memcpy(r.i, p, sizeof r.i); return r; }
+RS_INLINE rs_swi sw_gatheri(const int32_t *base, rs_swi id)
+{ rs_swi r; for (int k = 0; k < RS_SW; ++k) r.i[k] = base[id.i[k]]; return r; }
+RS_INLINE rs_swi sw_set1i(int32_t a) { rs_swi r; for (int k = 0; k < RS_SW; ++k) r.i[k] = a; return r; }
+RS_INLINE void sw_storei(int32_t *p, rs_swi a) { memcpy(p, a.i, sizeof a.i); }
+#  if RS_SSE
+RS_INLINE rs_swf sw_gather(const float *base, rs_swi id)
+{ return rs_set4(base[id.i[0]], base[id.i[1]], base[id.i[2]], base[id.i[3]]); }
+#    define sw_set1 rs_set1
+#    define sw_add rs_add
+#    define sw_sub rs_sub
+#    define sw_mul rs_mul
+#    define sw_div rs_div
+#    define sw_min rs_min
+#    define sw_max rs_max
+#    define sw_lt rs_lt
+#    define sw_le rs_le
+#    define sw_gt rs_gt
+#    define sw_ge rs_ge
+#    define sw_eq rs_eq
+#    define sw_ne rs_ne
+#    define sw_and rs_and
+#    define sw_or rs_or
+#    define sw_bits rs_movemask
+#    define sw_from_bits rs_mask_from_bits
+#    define sw_sign rs_signmask
+#    define sw_blend rs_blend
+#    define sw_store rs_store
+RS_INLINE rs_swm sw_lti(rs_swi a, rs_swi b)
+{ return rs_mask_from_bits((a.i[0] < b.i[0]) | (a.i[1] < b.i[1]) << 1 | (a.i[2] < b.i[2]) << 2
+                           | (a.i[3] < b.i[3]) << 3); }
+RS_INLINE rs_swi sw_blendi(rs_swm m, rs_swi a, rs_swi b)
+{
+    int bits = rs_movemask(m);
+    rs_swi r;
+    for (int k = 0; k < 4; ++k) r.i[k] = (bits >> k) & 1 ? a.i[k] : b.i[k];
+    return r;
+}
+#  else
+RS_INLINE rs_swf sw_gather(const float *base, rs_swi id) { return base[id.i[0]]; }
+RS_INLINE rs_swf sw_set1(float a) { return a; }
+RS_INLINE rs_swf sw_add(rs_swf a, rs_swf b) { return a + b; }
+RS_INLINE rs_swf sw_sub(rs_swf a, rs_swf b) { return a - b; }
+RS_INLINE rs_swf sw_mul(rs_swf a, rs_swf b) { return a * b; }
+RS_INLINE rs_swf sw_div(rs_swf a, rs_swf b) { return a / b; }
+RS_INLINE rs_swf sw_min(rs_swf a, rs_swf b) { return rs_minf(a, b); }
+RS_INLINE rs_swf sw_max(rs_swf a, rs_swf b) { return rs_maxf(a, b); }
+RS_INLINE rs_swm sw_lt(rs_swf a, rs_swf b) { return a < b; }
+RS_INLINE rs_swm sw_le(rs_swf a, rs_swf b) { return a <= b; }
+RS_INLINE rs_swm sw_gt(rs_swf a, rs_swf b) { return a > b; }
+RS_INLINE rs_swm sw_ge(rs_swf a, rs_swf b) { return a >= b; }
+RS_INLINE rs_swm sw_eq(rs_swf a, rs_swf b) { return a == b; }
+RS_INLINE rs_swm sw_ne(rs_swf a, rs_swf b) { return a != b; }
+RS_INLINE rs_swm sw_and(rs_swm a, rs_swm b) { return a & b; }
+RS_INLINE rs_swm sw_or(rs_swm a, rs_swm b) { return a | b; }
+RS_INLINE int sw_bits(rs_swm m) { return m; }
+RS_INLINE rs_swm sw_from_bits(int bits) { return bits & 1; }
+RS_INLINE rs_swm sw_sign(rs_swf a) { return signbit(a) != 0; }
+RS_INLINE rs_swf sw_blend(rs_swm m, rs_swf a, rs_swf b) { return m ? a : b; }
+RS_INLINE void sw_store(float *p, rs_swf a) { *p = a; }
+RS_INLINE rs_swm sw_lti(rs_swi a, rs_swi b) { return a.i[0] < b.i[0]; }
+RS_INLINE rs_swi sw_blendi(rs_swm m, rs_swi a, rs_swi b) { return m ? a : b; }
+#  endif
+#endif
+
+#if !RS_ISA_AVX512
+/* Append the ids of the lanes in `bits` to out[*n], without branches (out has
+ * RS_SW slots of slack). */
+RS_INLINE void sw_append(int32_t *out, int *n, rs_swi id, int bits)
+{
+    int32_t lane[RS_SW];
+    int m = *n;
+    sw_storei(lane, id);
+    for (int k = 0; k < RS_SW; ++k) {
+        out[m] = lane[k];
+        m += (bits >> k) & 1;
+    }
+    *n = m;
+}
+#endif
+
+/* The ids of the group of RS_SW rays that starts at ids[g] of a stream of n:
+ * a short last group repeats its first id in the missing lanes, and *valid
+ * masks them off. */
+RS_INLINE rs_swi rs_stream_group(const int32_t *ids, int g, int n, int *valid)
+{
+    if (n - g >= RS_SW) {
+        *valid = (1 << RS_SW) - 1;
+        return sw_ids(ids + g);
+    }
+    int32_t lane[RS_SW];
+    for (int k = 0; k < RS_SW; ++k)
+        lane[k] = ids[g + (g + k < n ? k : 0)];
+    *valid = (1 << (n - g)) - 1;
+    return sw_ids(lane);
+}
+
+/* ------------------------------------------------------------------------ */
+/* Scratch memory and tasks                                                 */
+/* ------------------------------------------------------------------------ */
+
+/* How the children of a node are ordered for a stream (the first is visited first). */
+enum rs_stream_order {
+    RS_ORDER_DIRECTION = 0, /* near corner first along the stream's majority octant */
+    RS_ORDER_VOTES = 1      /* the child most rays enter first, first */
+};
+
+/* A stream waiting on the task stack: its ray ids are ids[first, first + n). */
+typedef struct rs_stream_task {
+    int32_t ref;        /* >= 0: a 4-wide node; < 0: a leaf, first triangle -ref - 1 */
+    int32_t tris;       /* leaf triangles */
+    int32_t first;      /* where its ids start in rs_stream_scratch.ids */
+    int32_t n;          /* rays in the stream */
+} rs_stream_task;
+
+/* A box one ray waits to visit, for the single-ray finish of small streams. */
+typedef struct rs_stream_entry {
+    int32_t ref;        /* as rs_stream_task.ref */
+    int32_t tris;       /* leaf triangles */
+    float entry;        /* where the ray enters the box */
+} rs_stream_entry;
+
+/* Scratch memory of one traversal call, sized by the stream size and the
+ * depth of the 4-wide tree.  Each node popped replaces its stream by at most
+ * four sub-streams no larger than it, at most three of which wait while the
+ * walk goes one level down; so (3 * depth + 4) streams of `size` ids, and as
+ * many tasks, bound the stacks. */
+typedef struct rs_stream_scratch {
+    int32_t *ids;           /* stack of id slices */
+    int32_t *sub[4];        /* a node's per-child sub-streams while it is filtered */
+    rs_stream_task *tasks;  /* task stack */
+    rs_stream_entry *single;/* stack of the single-ray finish */
+    int size;               /* stream size (rays) */
+    int depth;              /* levels of the 4-wide tree */
+} rs_stream_scratch;
+
+RS_INLINE int rs_stream_slots(int depth) { return 3 * depth + 4; }
+
+RS_INLINE void rs_stream_free(rs_stream_scratch *w)
+{
+    free(w->ids);
+    for (int k = 0; k < 4; ++k)
+        free(w->sub[k]);
+    free(w->tasks);
+    free(w->single);
+}
+
+/* Allocate the scratch memory; returns 0 when out of memory (nothing held). */
+RS_INLINE int rs_stream_alloc(rs_stream_scratch *w, int size, int depth)
+{
+    int slots = rs_stream_slots(depth);
+    w->size = size;
+    w->depth = depth;
+    w->ids = (int32_t *)malloc(((size_t)slots * size + RS_SW) * sizeof(int32_t));
+    for (int k = 0; k < 4; ++k)
+        w->sub[k] = (int32_t *)malloc(((size_t)size + RS_SW) * sizeof(int32_t));
+    w->tasks = (rs_stream_task *)malloc((size_t)slots * sizeof(rs_stream_task));
+    w->single = (rs_stream_entry *)malloc((size_t)slots * sizeof(rs_stream_entry));
+    if (!w->ids || !w->sub[0] || !w->sub[1] || !w->sub[2] || !w->sub[3] || !w->tasks
+        || !w->single) {
+        rs_stream_free(w);
+        return 0;
+    }
+    return 1;
+}
+
+/* ------------------------------------------------------------------------ */
+/* A stream at an inner node: filter it into the children's sub-streams      */
+/* ------------------------------------------------------------------------ */
+
+/* Split ids[0, n) into w->sub[k] (cnt[k] ids each): the rays that hit child k's
+ * box before their current t.  votes[k] counts the rays for which child k is
+ * the nearest box hit; negative[a] the rays travelling down axis a. */
+RS_INLINE void rs_stream_filter(const rs_rays *r, const rs_node4 *node, const int32_t *ids,
+                                int n, rs_stream_scratch *w, int cnt[4], int votes[4],
+                                int negative[3])
+{
+    int live[4], m = 0;
+    for (int k = 0; k < 4; ++k) {
+        cnt[k] = votes[k] = 0;
+        if (node->lo[0][k] <= node->hi[0][k])    /* an empty slot has lo > hi */
+            live[m++] = k;
+    }
+    negative[0] = negative[1] = negative[2] = 0;
+    const rs_swf slack = sw_set1(RS_BOX_SLACK), inf = sw_set1(INFINITY);
+    for (int g = 0; g < n; g += RS_SW) {
+        int valid;
+        rs_swi id = rs_stream_group(ids, g, n, &valid);
+        rs_swf o[3], inv[3];
+        rs_swm neg[3];
+        for (int a = 0; a < 3; ++a) {
+            o[a] = sw_gather(r->o[a], id);
+            inv[a] = sw_gather(r->inv[a], id);
+            neg[a] = sw_sign(inv[a]);
+            negative[a] += rs_popcount(sw_bits(neg[a]) & valid);
+        }
+        rs_swf tmin = sw_gather(r->tmin, id), t = sw_gather(r->t, id), best = inf;
+        int nearest[4] = {0, 0, 0, 0};
+        for (int j = 0; j < m; ++j) {
+            int k = live[j];
+            rs_swf tn = tmin, tf = t;
+            for (int a = 0; a < 3; ++a) {
+                rs_swf t_lo = sw_mul(sw_sub(sw_set1(node->lo[a][k]), o[a]), inv[a]);
+                rs_swf t_hi = sw_mul(sw_sub(sw_set1(node->hi[a][k]), o[a]), inv[a]);
+                tn = sw_max(sw_blend(neg[a], t_hi, t_lo), tn);
+                tf = sw_min(sw_blend(neg[a], t_lo, t_hi), tf);
+            }
+            rs_swm hit = sw_and(sw_le(tn, sw_mul(tf, slack)), sw_from_bits(valid));
+            int bits = sw_bits(hit);
+            sw_append(w->sub[k], &cnt[k], id, bits);
+            int closer = sw_bits(sw_and(hit, sw_lt(tn, best)));
+            best = sw_blend(sw_from_bits(closer), tn, best);
+            for (int i = 0; i < j; ++i)
+                nearest[i] &= ~closer;
+            nearest[j] = closer;
+        }
+        for (int j = 0; j < m; ++j)
+            votes[live[j]] += rs_popcount(nearest[j]);
+    }
+}
+
+/* Order the children with a non-empty sub-stream, the one to visit first first;
+ * returns how many.  Ties keep the node's child order. */
+RS_INLINE int rs_stream_order(const rs_node4 *node, const int cnt[4], const int votes[4],
+                              const int negative[3], int n, int order, int visit[4])
+{
+    float key[4];
+    int m = 0;
+    for (int k = 0; k < 4; ++k) {
+        if (!cnt[k])
+            continue;
+        if (order == RS_ORDER_VOTES) {
+            key[k] = (float)-votes[k];
+        } else {
+            key[k] = 0.0f;
+            for (int a = 0; a < 3; ++a)
+                key[k] += 2 * negative[a] > n ? -node->hi[a][k] : node->lo[a][k];
+        }
+        int j = m++;
+        while (j > 0 && key[visit[j - 1]] > key[k]) {
+            visit[j] = visit[j - 1];
+            --j;
+        }
+        visit[j] = k;
+    }
+    return m;
+}
+
+/* ------------------------------------------------------------------------ */
+/* A stream at a leaf                                                       */
+/* ------------------------------------------------------------------------ */
+
+/* Test the rays ids[0, n) against triangles tris[0, count), RS_SW rays at a
+ * time; each lane performs rs_tri1's operations and acceptance rule. */
+RS_INLINE void rs_stream_leaf(rs_rays *r, const rs_tri *tris, int count, const int32_t *ids,
+                              int n, int any_hit)
+{
+    const rs_swf zero = sw_set1(0.0f), one = sw_set1(1.0f), retired = sw_set1(-INFINITY);
+    for (int g = 0; g < n; g += RS_SW) {
+        int valid;
+        rs_swi id = rs_stream_group(ids, g, n, &valid);
+        rs_swf ox = sw_gather(r->o[0], id), oy = sw_gather(r->o[1], id),
+               oz = sw_gather(r->o[2], id);
+        rs_swf dx = sw_gather(r->d[0], id), dy = sw_gather(r->d[1], id),
+               dz = sw_gather(r->d[2], id);
+        rs_swf tmin = sw_gather(r->tmin, id), best = sw_gather(r->t, id);
+        rs_swi bprim = sw_gatheri(r->prim, id);
+        rs_swf bu = zero, bv = zero;
+        rs_swm lanes = sw_from_bits(valid);
+        int changed = 0;
+        for (int k = 0; k < count; ++k) {
+            const rs_tri *tr = &tris[k];
+            rs_swf e1x = sw_set1(tr->e1[0]), e1y = sw_set1(tr->e1[1]), e1z = sw_set1(tr->e1[2]);
+            rs_swf e2x = sw_set1(tr->e2[0]), e2y = sw_set1(tr->e2[1]), e2z = sw_set1(tr->e2[2]);
+            rs_swf px = sw_sub(sw_mul(dy, e2z), sw_mul(dz, e2y));
+            rs_swf py = sw_sub(sw_mul(dz, e2x), sw_mul(dx, e2z));
+            rs_swf pz = sw_sub(sw_mul(dx, e2y), sw_mul(dy, e2x));
+            rs_swf det = sw_add(sw_add(sw_mul(e1x, px), sw_mul(e1y, py)), sw_mul(e1z, pz));
+            rs_swf inv = sw_div(one, det);
+            rs_swf sx = sw_sub(ox, sw_set1(tr->v0[0]));
+            rs_swf sy = sw_sub(oy, sw_set1(tr->v0[1]));
+            rs_swf sz = sw_sub(oz, sw_set1(tr->v0[2]));
+            rs_swf u = sw_mul(sw_add(sw_add(sw_mul(sx, px), sw_mul(sy, py)), sw_mul(sz, pz)), inv);
+            rs_swf qx = sw_sub(sw_mul(sy, e1z), sw_mul(sz, e1y));
+            rs_swf qy = sw_sub(sw_mul(sz, e1x), sw_mul(sx, e1z));
+            rs_swf qz = sw_sub(sw_mul(sx, e1y), sw_mul(sy, e1x));
+            rs_swf v = sw_mul(sw_add(sw_add(sw_mul(dx, qx), sw_mul(dy, qy)), sw_mul(dz, qz)), inv);
+            rs_swf t = sw_mul(sw_add(sw_add(sw_mul(e2x, qx), sw_mul(e2y, qy)), sw_mul(e2z, qz)),
+                              inv);
+            rs_swi tid = sw_set1i(tr->id);
+            rs_swm ok = sw_and(sw_and(sw_ne(det, zero), sw_ge(u, zero)),
+                               sw_and(sw_ge(v, zero), sw_le(sw_add(u, v), one)));
+            ok = sw_and(ok, sw_gt(t, tmin));
+            ok = sw_and(ok, sw_or(sw_lt(t, best), sw_and(sw_eq(t, best), sw_lti(tid, bprim))));
+            ok = sw_and(ok, lanes);
+            int bits = sw_bits(ok);
+            if (bits) {
+                best = sw_blend(ok, any_hit ? retired : t, best);
+                bprim = sw_blendi(ok, tid, bprim);
+                bu = sw_blend(ok, u, bu);
+                bv = sw_blend(ok, v, bv);
+                changed |= bits;
+            }
+        }
+        if (changed) {
+            float lt[RS_SW], lu[RS_SW], lv[RS_SW];
+            int32_t lp[RS_SW], li[RS_SW];
+            sw_store(lt, best);
+            sw_store(lu, bu);
+            sw_store(lv, bv);
+            sw_storei(lp, bprim);
+            sw_storei(li, id);
+            for (; changed; changed &= changed - 1) {
+                int k = rs_lowest(changed);
+                int32_t i = li[k];
+                r->t[i] = lt[k];
+                r->prim[i] = lp[k];
+                r->u[i] = lu[k];
+                r->v[i] = lv[k];
+            }
+        }
+    }
+}
+
+/* ------------------------------------------------------------------------ */
+/* A small stream: one ray at a time from its node                          */
+/* ------------------------------------------------------------------------ */
+
+/* Ask for a box's data ahead of its visit: a 4-wide node's two cache lines, or
+ * a leaf's first triangles (hints; no effect on results). */
+RS_INLINE void rs_stream_prefetch(const rs_node4 *nodes, const rs_tri *tris, int32_t ref)
+{
+    const char *p = ref >= 0 ? (const char *)&nodes[ref] : (const char *)&tris[-ref - 1];
+    rs_prefetch(p);
+    rs_prefetch(p + 64);
+}
+
+/* Ray i from box (ref, tris) down, as the `wide` traversal walks from the root:
+ * children hit are visited nearest first, waiting boxes are dropped once the
+ * ray's t is closer than where it enters them. */
+RS_INLINE void rs_stream_single(const rs_node4 *nodes, const rs_tri *tris, rs_rays *r, int i,
+                                int32_t ref, int32_t count, int any_hit,
+                                rs_stream_entry *stack, rs_counters *c)
+{
+    rs_stream_entry hit[4], tmp;
+    float entry[4];
+    int sp = 0;
+    while (1) {
+        if (ref >= 0) {
+            const rs_node4 *n = &nodes[ref];
+            c->box4 += 1;
+            int mask = rs_node4_hit(r, i, n, entry), m = 0;
+            for (int k = 0; k < 4; ++k) {
+                if (!(mask >> k & 1))
+                    continue;
+                hit[m].ref = n->child[k];
+                hit[m].tris = n->count[k];
+                hit[m].entry = entry[k];
+                rs_stream_prefetch(nodes, tris, hit[m].ref);
+                for (int j = m; j > 0 && hit[j - 1].entry > hit[j].entry; --j) {
+                    tmp = hit[j - 1];
+                    hit[j - 1] = hit[j];
+                    hit[j] = tmp;
+                }
+                ++m;
+            }
+            for (int k = m - 1; k > 0; --k)     /* farther children wait, farthest deepest */
+                stack[sp++] = hit[k];
+            if (m) {
+                ref = hit[0].ref;
+                count = hit[0].tris;
+                continue;
+            }
+        } else {
+            const rs_tri *leaf = &tris[-ref - 1];
+            for (int k = 0; k < count; ++k) {
+                c->tri1 += 1;
+                rs_tri1(r, i, &leaf[k], any_hit);
+            }
+            if (!(r->tmin[i] < r->t[i]))        /* an any-hit query found its hit */
+                return;
+        }
+        /* the nearest waiting box the ray still reaches before its closest hit */
+        for (;;) {
+            if (sp == 0)
+                return;
+            --sp;
+            if (stack[sp].entry <= r->t[i] * RS_BOX_SLACK)
+                break;
+        }
+        ref = stack[sp].ref;
+        count = stack[sp].tris;
+    }
+}
+
+/* ------------------------------------------------------------------------ */
+/* The traversal of one stream                                              */
+/* ------------------------------------------------------------------------ */
+
+/* Trace the n <= w->size rays whose ids are w->ids[0, n) from the root of
+ * `nodes`.  Streams of fewer than min_stream rays finish one ray at a time.
+ *
+ * Counters, the same on every ISA: one SIMD N_B per ray and node a stream
+ * visits (the ray meets the node's four child boxes, as in `wide`), one SIMD
+ * N_T per triangle and 4 rays (rounded up) a leaf's stream holds, and the
+ * single-ray finish counts as `wide` does.  stream_tasks and stream_rays count
+ * the streams popped and the rays they held. */
+RS_INLINE void rs_stream_trace(const rs_node4 *nodes, const rs_tri *tris, rs_rays *r, int n,
+                               int any_hit, int order, int min_stream, rs_stream_scratch *w,
+                               rs_counters *c)
+{
+    int cnt[4], votes[4], negative[3], visit[4];
+    int nt = 1;
+    w->tasks[0].ref = 0;
+    w->tasks[0].tris = 0;
+    w->tasks[0].first = 0;
+    w->tasks[0].n = n;
+    while (nt > 0) {
+        rs_stream_task task = w->tasks[--nt];
+        int32_t *ids = w->ids + task.first;
+        if (task.n < min_stream) {
+            for (int j = 0; j < task.n; ++j) {
+                int i = ids[j];
+                if (r->tmin[i] < r->t[i])
+                    rs_stream_single(nodes, tris, r, i, task.ref, task.tris, any_hit, w->single,
+                                     c);
+            }
+            continue;
+        }
+        c->stream_tasks += 1;
+        c->stream_rays += task.n;
+        if (task.ref < 0) {
+            c->tri4 += (int64_t)task.tris * ((task.n + 3) / 4);
+            rs_stream_leaf(r, &tris[-task.ref - 1], task.tris, ids, task.n, any_hit);
+            continue;
+        }
+        const rs_node4 *node = &nodes[task.ref];
+        c->box4 += task.n;
+        rs_stream_filter(r, node, ids, task.n, w, cnt, votes, negative);
+        int m = rs_stream_order(node, cnt, votes, negative, task.n, order, visit);
+        /* the parent's ids are read: its slice takes the sub-streams, the one
+         * to visit first last, so it is popped first */
+        int first = task.first;
+        for (int j = m - 1; j >= 0; --j) {
+            int k = visit[j];
+            memcpy(w->ids + first, w->sub[k], (size_t)cnt[k] * sizeof(int32_t));
+            rs_stream_task *child = &w->tasks[nt++];
+            child->ref = node->child[k];
+            child->tris = node->count[k];
+            child->first = first;
+            child->n = cnt[k];
+            first += cnt[k];
+        }
+        if (m)
+            rs_stream_prefetch(nodes, tris, node->child[visit[0]]);
+    }
+}
+
+#endif

@@ -1,0 +1,144 @@
+"""``stream``: dynamic ray stream traversal (Barringer and Akenine-Moller, SIGGRAPH 2014).
+
+Beyond the paper: instead of one ray (``wide``) or one packet (``ranged``) at
+a time, a large stream of ray ids descends the 4-wide BVH together.  At each
+node the stream is split into one sub-stream per child, the rays whose slab
+test hits that child, with SIMD tests over rays (16, 8 or 4 lanes on AVX-512,
+AVX2 and SSE2; one on the scalar build); the sub-streams wait on a task
+stack, and leaves test their stream against their triangles, again SIMD over
+rays.  A node's box data is loaded once for the whole stream, and the lanes
+are always full whatever the rays' directions, which is what the paper gains
+on incoherent rays.  The kernel is ``raysort/include/raysort/stream.h``.
+
+The stream is the whole traversal call, not one sub-packet: every active ray
+of every sub-packet passed to ``intersect`` (the pipeline passes a whole
+batch, ``batch_rays`` rays, per thread), in the sorter's order, cut into
+streams of ``stream_size`` rays.  Sub-packet boundaries do not matter; a
+sorter helps through the order (neighbouring rays share nodes and leaves,
+so streams stay large deeper in the tree).
+"""
+from libc.stdint cimport int32_t, uint8_t
+from raysort._types cimport rs_node4, rs_tri, rs_rays, rs_counters, rays_view
+
+from raysort import isa
+from raysort.sdk import ConfigError, Counters, PluginContractError, Traversal, integer
+
+
+cdef extern from "raysort/stream.h" nogil:
+    enum: RS_SW
+    enum: RS_ORDER_DIRECTION, RS_ORDER_VOTES
+    ctypedef struct rs_stream_scratch:
+        int32_t *ids
+    int rs_stream_alloc(rs_stream_scratch *w, int size, int depth)
+    void rs_stream_free(rs_stream_scratch *w)
+    void rs_stream_trace(const rs_node4 *nodes, const rs_tri *tris, rs_rays *r, int n,
+                         int any_hit, int order, int min_stream, rs_stream_scratch *w,
+                         rs_counters *c)
+
+
+#: the child orders ``order`` accepts, by name
+ORDERS = {"direction": RS_ORDER_DIRECTION, "votes": RS_ORDER_VOTES}
+#: most rays per stream (ids are int32 offsets into buffers of depth * size ids)
+MAX_STREAM = 1 << 20
+
+
+def lanes():
+    """Rays per SIMD test in this ISA build of the kernel."""
+    return RS_SW
+
+
+def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream):
+    """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa)."""
+    cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
+    cdef int capacity = packets.capacity, n_packets = starts.shape[0]
+    cdef int k, i, m, size, ok
+    cdef long long active = 0
+    for k in range(n_packets):
+        if starts[k] < 0 or counts[k] < 0 or <long long> starts[k] + counts[k] > capacity:
+            raise PluginContractError(f"stream: sub-packet {k} (lanes {starts[k]}.."
+                                      f"{starts[k] + counts[k]}) lies outside the "
+                                      f"{capacity} lanes of the batch")
+    if n_packets == 0 or len(bvh.triangles) == 0:
+        return Counters()
+    cdef const uint8_t[::1] node_bytes = bvh.wide.view("u1").reshape(-1)
+    cdef const uint8_t[::1] tri_bytes = bvh.triangles.view("u1").reshape(-1)
+    cdef const rs_node4 *nodes = <const rs_node4 *> &node_bytes[0]
+    cdef const rs_tri *tris = <const rs_tri *> &tri_bytes[0]
+    cdef rs_rays rays = rays_view(packets.rows, packets.prim, packets.u, packets.v)
+    cdef rs_counters c
+    cdef rs_stream_scratch w
+    c.rays = c.ia = c.box1 = c.box4 = c.tri1 = c.tri4 = c.stream_tasks = c.stream_rays = 0
+
+    with nogil:
+        for k in range(n_packets):
+            for i in range(starts[k], starts[k] + counts[k]):
+                if rays.tmin[i] < rays.t[i]:
+                    active += 1
+    if active == 0:
+        return Counters()
+    size = <int> min(stream_size, active)
+    if not rs_stream_alloc(&w, size, bvh.wide_depth):
+        raise MemoryError()
+    try:
+        with nogil:
+            m = 0
+            for k in range(n_packets):
+                for i in range(starts[k], starts[k] + counts[k]):
+                    if rays.tmin[i] < rays.t[i]:
+                        w.ids[m] = i
+                        m += 1
+                        if m == size:
+                            rs_stream_trace(nodes, tris, &rays, m, any_hit, order, min_stream,
+                                            &w, &c)
+                            m = 0
+            if m:
+                rs_stream_trace(nodes, tris, &rays, m, any_hit, order, min_stream, &w, &c)
+    finally:
+        rs_stream_free(&w)
+    return Counters(rays=active, box1=c.box1, box4=c.box4, tri1=c.tri1, tri4=c.tri4,
+                    stream_tasks=c.stream_tasks, stream_rays=c.stream_rays)
+
+
+class StreamTraversal(Traversal):
+    """A stream of rays through the 4-wide BVH together (Barringer & Akenine-Moller 2014).
+
+    Every active ray of the call, in the sorter's order, is cut into streams
+    of ``stream_size`` rays; each stream descends ``BVH.wide`` as a task stack
+    of (node, sub-stream) pairs, filtered at each node by SIMD slab tests over
+    rays (16/8/4/1 lanes on AVX-512/AVX2/SSE2/scalar) and tested at leaves
+    SIMD over rays.  Children are visited in an order chosen per stream;
+    streams smaller than ``min_stream`` finish one ray at a time as ``wide``
+    does.  Exact: each lane performs the scalar kernels' operations.
+
+    Counters (the same on every ISA): SIMD N_B is one per ray and node it
+    visits (four child boxes, as ``wide``), SIMD N_T one per triangle and 4
+    rays (rounded up) of a leaf's stream; the single-ray finish counts as
+    ``wide``.  ``stream_tasks`` / ``stream_rays`` give the mean stream size.
+
+    ===========  ======  ==========  ========================================
+    parameter    type    default     meaning
+    ===========  ======  ==========  ========================================
+    stream_size  int     16384       most rays per stream (capped by the
+                                     rays of the call, i.e. the batch)
+    order        str     "votes"     child order per stream: ``votes`` (the
+                                     child most of its rays enter first,
+                                     first) or ``direction`` (nearest box
+                                     corner along the stream's majority
+                                     octant first)
+    min_stream   int     8           streams of fewer rays finish one ray
+                                     at a time from their node (0: never)
+    ===========  ======  ==========  ========================================
+    """
+
+    trusted = True
+
+    def __init__(self, *, stream_size=16384, order="votes", min_stream=8):
+        self.stream_size = integer("stream_size", stream_size, 1, MAX_STREAM)
+        if order not in ORDERS:
+            raise ConfigError(f"order must be one of {', '.join(ORDERS)}; got {order!r}")
+        self.order = order
+        self.min_stream = integer("min_stream", min_stream, 0, MAX_STREAM)
+
+    def intersect(self, bvh, packets, any_hit=False):
+        return isa.module("traversals.stream").trace(bvh, packets, any_hit, self.stream_size,
+                                                     ORDERS[self.order], self.min_stream)

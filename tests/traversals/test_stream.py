@@ -1,0 +1,193 @@
+"""The ``stream`` traversal: brute force's hits for every stream size, child order, small-stream
+threshold and ISA; its counters against the single-ray ``wide`` traversal it falls back to.
+
+The conformance suite (test_conformance.py) runs ``stream`` with its defaults; here the
+parameters are pushed to their ends: streams of one ray, streams that never fall back to
+single rays (every leaf and node sees streams of 1..n rays), and the whole batch as one stream.
+"""
+import numpy as np
+import pytest
+
+import raysort
+from raysort import isa
+from raysort.bvh import BVH
+from raysort.rays import RayBatch, gather, scatter, scatter_occluded
+from raysort.reference import brute_force
+
+from _helpers import assert_same_hits, random_rays
+
+F32 = np.float32
+SETTINGS = [dict(stream_size=s, min_stream=m, order=o)
+            for s, m, o in [(1, 0, "votes"), (3, 0, "direction"), (64, 0, "votes"),
+                            (1000, 4, "direction"), (16384, 0, "votes"),
+                            (16384, 8, "direction"), (16384, 1 << 20, "votes")]]
+
+
+@pytest.fixture(params=isa.ISAS)
+def each_isa(request):
+    """Switch every kernel to one ISA for the test (skipped where it cannot run)."""
+    name = request.param
+    if name not in isa.available():
+        pytest.skip(f"ISA {name} is not compiled here or this CPU cannot run it")
+    previous = isa.use(name)
+    yield name
+    isa.use(previous)
+
+
+def trace(bvh, rays, ray_order=None, offsets=None, any_hit=False, **params):
+    """Gather (by default in order, one sub-packet), trace with ``stream``, scatter back."""
+    n = len(rays)
+    ray_order = np.arange(n, dtype=np.int32) if ray_order is None else \
+        np.asarray(ray_order, np.int32)
+    offsets = np.array([0, n], np.int32) if offsets is None else offsets
+    packets = gather(rays, ray_order, offsets)
+    counters = raysort.create("traversals", {"type": "stream", **params}).intersect(bvh, packets,
+                                                                         any_hit=any_hit)
+    hits = scatter_occluded(packets, n) if any_hit else scatter(packets, n)
+    return hits, counters
+
+
+def fixed_offsets(n, size):
+    return np.append(np.arange(0, n, size), n).astype(np.int32)
+
+
+@pytest.fixture(scope="module")
+def soup():
+    """2000 random triangles of mixed sizes (5% zero-area), a BVH with small leaves, 3000
+    random rays and their brute-force hits."""
+    rng = np.random.default_rng(41)
+    m = 2000
+    size = rng.choice([0.05, 0.5, 2.0], size=(m, 1, 1))
+    V = (rng.random((m, 1, 3)) * 20 + rng.normal(size=(m, 3, 3)) * size).reshape(-1, 3)
+    V = V.astype(F32)
+    F = np.arange(3 * m, dtype=np.int32).reshape(m, 3)
+    bad = rng.random(m) < 0.05
+    F[bad, 2] = F[bad, 1]
+    bvh = BVH(V, F, max_leaf=4)
+    rays = random_rays(rng, 3000, bvh.bounds)
+    return V, F, bvh, rays, brute_force(V, F, rays)
+
+
+@pytest.fixture(scope="module")
+def ties():
+    """A grid of unit quads with duplicated faces, shuffled, and rays through its vertices,
+    edges and along its plane: equal t on several triangles, grazing rays."""
+    rng = np.random.default_rng(9)
+    g = 8
+    ii, jj = np.meshgrid(np.arange(g + 1), np.arange(g + 1), indexing="ij")
+    V = np.column_stack([ii.ravel(), jj.ravel(), np.zeros(ii.size)]).astype(F32)
+    k = lambda i, j: i * (g + 1) + j  # noqa: E731
+    F = np.array([f for i in range(g) for j in range(g)
+                  for f in ([k(i, j), k(i + 1, j), k(i + 1, j + 1)],
+                            [k(i, j), k(i + 1, j + 1), k(i, j + 1)])], np.int32)
+    F = np.vstack([F, F[rng.choice(len(F), 24, replace=False)], [[0, 0, 1]]])  # + a degenerate
+    F = F[rng.permutation(len(F))]
+    n = 2000
+    targets = np.column_stack([rng.integers(0, g + 1, n) * 0.5, rng.integers(0, g + 1, n) * 0.5,
+                               np.zeros(n)])
+    origins = targets + rng.normal(size=(n, 3)) * [1, 1, 3]
+    origins[: n // 4, 2] = 0.0                             # in the plane: grazing
+    directions = targets - origins
+    directions[: n // 4] = rng.normal(size=(n // 4, 3)) * [1, 1, 0]
+    rays = RayBatch.from_arrays(origins.astype(F32), directions.astype(F32))
+    return V, F, BVH(V, F, max_leaf=3), rays, brute_force(V, F, rays)
+
+
+@pytest.mark.parametrize("params", SETTINGS, ids=lambda p: "-".join(map(str, p.values())))
+def test_soup_matches_brute_force(each_isa, soup, params):
+    """Random incoherent rays in random order and sub-packets: brute force's hits, any-hit flags."""
+    V, F, bvh, rays, ref = soup
+    rng = np.random.default_rng(3)
+    order = rng.permutation(len(rays))
+    offsets = fixed_offsets(len(rays), int(rng.integers(1, 300)))
+    hits, counters = trace(bvh, rays, order, offsets, **params)
+    assert_same_hits(hits, ref, f"{each_isa} {params}")
+    occluded, _ = trace(bvh, rays, order, offsets, any_hit=True, **params)
+    assert np.array_equal(occluded, ref.prim >= 0)
+    assert counters.rays == len(rays)
+
+
+@pytest.mark.parametrize("params", SETTINGS[:3] + SETTINGS[-3:],
+                         ids=lambda p: "-".join(map(str, p.values())))
+def test_ties_degenerates_and_grazing_rays(each_isa, ties, params):
+    """Rays through shared vertices and edges and duplicated faces tie at equal t: the lower
+    primitive wins; rays in the plane and the degenerate face are never hit."""
+    V, F, bvh, rays, ref = ties
+    assert (ref.prim >= 0).mean() > 0.5
+    hits, _ = trace(bvh, rays, **params)
+    assert_same_hits(hits, ref, f"{each_isa} {params}")
+
+
+def test_sibenik_diffuse(each_isa, workloads, sibenik):
+    """First-bounce diffuse rays of Sibenik in the nah sorter's order, one stream per call."""
+    rays = workloads(sibenik, "diffuse").rays
+    ref = brute_force(sibenik.vertices, sibenik.faces, rays)
+    order, offsets = raysort.create("sorters", "nah").sort(
+        rays, np.array([0, len(rays)], np.int32), sibenik.bvh().bounds)
+    for params in (dict(), dict(min_stream=0, order="direction", stream_size=500)):
+        hits, _ = trace(sibenik.bvh(), rays, order, offsets, **params)
+        assert_same_hits(hits, ref, f"{each_isa} sibenik {params}")
+
+
+def test_lanes_follow_the_isa(each_isa):
+    expected = {"scalar": 1, "sse2": 4, "avx2": 8, "avx512": 16}[each_isa]
+    assert isa.module("traversals.stream").lanes() == expected
+
+
+def test_counters_are_the_same_on_every_isa(soup):
+    V, F, bvh, rays, _ = soup
+    seen = {}
+    for name in isa.available():
+        previous = isa.use(name)
+        try:
+            seen[name] = trace(bvh, rays, min_stream=4, stream_size=700)[1].as_dict()
+        finally:
+            isa.use(previous)
+    assert all(c == seen[isa.baseline()] for c in seen.values()), seen
+
+
+def test_single_ray_finish_counts_as_wide(soup):
+    """With a threshold above the stream size every ray walks alone from the root: the
+    counters (and hits) are exactly those of ``wide``."""
+    V, F, bvh, rays, ref = soup
+    hits, c = trace(bvh, rays, min_stream=1 << 20)
+    packets = gather(rays, np.arange(len(rays), dtype=np.int32),
+                     np.array([0, len(rays)], np.int32))
+    w = raysort.create("traversals", "wide").intersect(bvh, packets)
+    assert (c.box4, c.tri1, c.tri4, c.box1, c.ia) == (w.box4, w.tri1, 0, 0, 0)
+    assert c.stream_tasks == c.stream_rays == 0
+
+
+def test_stream_counters(soup):
+    """Every stream popped is counted with its rays: the root stream holds every ray, each
+    ray of an inner node's stream is one SIMD N_B, and leaf streams count SIMD N_T."""
+    V, F, bvh, rays, _ = soup
+    n = len(rays)
+    _, one = trace(bvh, rays, min_stream=0)
+    assert one.rays == n and one.stream_rays >= n and one.stream_tasks >= 1
+    assert one.box4 >= n and one.tri4 > 0 and one.tri1 == one.box1 == one.ia == 0
+    assert one.stream_rays > one.box4               # leaf streams hold rays too
+    _, split = trace(bvh, rays, min_stream=0, stream_size=n // 3 + 1)
+    assert split.stream_tasks > one.stream_tasks    # three root streams, each split again
+    _, mixed = trace(bvh, rays, min_stream=16)
+    assert mixed.tri1 > 0 and mixed.stream_tasks < one.stream_tasks
+
+
+def test_parameters_are_checked():
+    with pytest.raises(raysort.ConfigError, match="order"):
+        raysort.create("traversals", {"type": "stream", "order": "random"})
+    with pytest.raises(raysort.ConfigError, match="stream_size"):
+        raysort.create("traversals", {"type": "stream", "stream_size": 0})
+    with pytest.raises(raysort.ConfigError, match="min_stream"):
+        raysort.create("traversals", {"type": "stream", "min_stream": -1})
+
+
+def test_pipeline_image_equals_wide(sibenik):
+    """A small render with stream gives wide's image bit for bit, with stream counters."""
+    images = {}
+    for name in ("wide", "stream"):
+        pipe = raysort.Pipeline(sibenik, traversal=name, sorter="nah")
+        result = pipe.render(32, 24, spp=1, seed=3)
+        images[name] = result
+    assert np.array_equal(images["wide"].image, images["stream"].image)
+    assert images["stream"].stats.counters[1].stream_tasks > 0
