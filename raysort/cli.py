@@ -86,7 +86,7 @@ def _print_summary(result, out, stats_table, stream=None, created=()):
           file=stream)
     print(f"  throughput: {st.mrays_per_second:.3f} Mrays/s", file=stream)
     stages = "  ".join(f"{k} {v:.2f}" for k, v in st.stage_seconds.items() if v > 0)
-    print(f"  stage seconds (summed over threads): {stages}", file=stream)
+    print(f"  stage CPU seconds (summed over threads): {stages}", file=stream)
     if stats_table:
         total = st.closest_hit_counters()
         if not total.available:

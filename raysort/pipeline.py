@@ -36,7 +36,8 @@ from raysort.errors import ConfigError
 from raysort.params import boolean, integer
 from raysort.paths import Paths
 from raysort.progress import with_rays
-from raysort.rays import MAX_RAYS, Hits, RayBatch, gather, scatter, scatter_occluded
+from raysort.rays import (MAX_RAYS, Hits, RayBatch, add_unoccluded, gather, scatter,
+                          scatter_occluded)
 from raysort.scene import Scene, load_scene
 from raysort.stats import Counters
 
@@ -67,7 +68,8 @@ def morton_order(width, height):
 class RenderStats:
     """Where the time went and how much work the traversal did.
 
-    ``stage_seconds`` are summed over worker threads (CPU seconds per stage);
+    ``stage_seconds`` are the CPU seconds of each stage (thread CPU time, summed
+    over worker threads, so a thread waiting for the GIL or a core costs nothing);
     ``wall_seconds`` is the elapsed time of the whole render.
     """
 
@@ -329,7 +331,7 @@ class Pipeline:
         batch = gather(rays, order, offsets)
         clock.lap("gather")
         before = contract.before_traversal(batch) if self._checked(self.traversal) else None
-        counters = self._intersect(batch, any_hit, threads)
+        counters = self._intersect(batch, any_hit, threads, timings)
         clock.lap("traverse")
         if self._checked(self.traversal):
             contract.check_hits(self.traversal, batch, before, order, offsets,
@@ -339,16 +341,24 @@ class Pipeline:
         clock.lap("scatter")
         return out, counters
 
-    def _intersect(self, batch, any_hit, threads=1):
+    def _intersect(self, batch, any_hit, threads=1, timings=None):
         def run(part):
             return contract.call_plugin("traversals", self.traversal, "intersect", self.bvh,
                                         part, any_hit)
 
+        def run_timed(part):
+            start = time.thread_time()
+            return run(part), time.thread_time() - start
+
         if threads > 1 and batch.n_packets > 1:
             cuts = np.linspace(0, batch.n_packets, min(threads, batch.n_packets) + 1).astype(int)
             with ThreadPoolExecutor(max_workers=len(cuts) - 1) as pool:
-                parts = list(pool.map(lambda ab: run(batch.slice(*ab)),
+                timed = list(pool.map(lambda ab: run_timed(batch.slice(*ab)),
                                       zip(cuts[:-1], cuts[1:])))
+            parts = [counters for counters, _ in timed]
+            if timings is not None:     # the workers' CPU time: the caller only waited
+                timings["traverse"] = (timings.get("traverse", 0.0)
+                                       + sum(seconds for _, seconds in timed))
         else:
             parts = [run(batch)]
         total = Counters()
@@ -500,8 +510,7 @@ class Pipeline:
         stats.shadow_rays += len(shadow.rays)
         stats.shadow_counters = stats.shadow_counters + counters
         clock = _Clock(stats.stage_seconds)
-        visible = ~occluded
-        np.add.at(radiance, shadow.slot[visible], shadow.contribution[:, visible].T)
+        add_unoccluded(radiance, shadow.slot, shadow.contribution, occluded)
         clock.lap("shade")
 
 
@@ -537,16 +546,16 @@ def _check_image_size(width, height):
 
 
 class _Clock:
-    """Adds the time since the last lap to ``timings[stage]``."""
+    """Adds the calling thread's CPU time since the last lap to ``timings[stage]``."""
 
     __slots__ = ("timings", "last")
 
     def __init__(self, timings):
         self.timings = timings
-        self.last = time.perf_counter()
+        self.last = time.thread_time()
 
     def lap(self, stage):
-        now = time.perf_counter()
+        now = time.thread_time()
         if stage is not None and self.timings is not None:
             self.timings[stage] = self.timings.get(stage, 0.0) + now - self.last
         self.last = now

@@ -20,6 +20,7 @@ can use aligned 4-wide loads on lanes ``[4k, 4k + 4)``.
 """
 from __future__ import annotations
 
+import math
 import numbers
 
 import numpy as np
@@ -29,7 +30,7 @@ from raysort._layout import MAX_PACKET, PacketRow, RayRow
 from raysort.errors import ConfigError
 
 __all__ = ["RayBatch", "Packets", "Hits", "RayRow", "PacketRow", "MAX_PACKET", "aligned_empty",
-           "gather", "scatter", "scatter_occluded"]
+           "gather", "scatter", "scatter_occluded", "add_unoccluded"]
 
 #: row names of a ray batch and of gathered packets, in row order (types.h's enums)
 RAY_ROWS = tuple(row.name for row in RayRow)
@@ -62,7 +63,7 @@ def _round4(n):
 def aligned_empty(shape, dtype, align=ALIGN):
     """An uninitialised C-contiguous array whose data starts ``align``-aligned."""
     dtype = np.dtype(dtype)
-    nbytes = int(np.prod(shape)) * dtype.itemsize
+    nbytes = math.prod(shape) * dtype.itemsize
     raw = np.empty(nbytes + align, dtype=np.uint8)
     start = (-raw.ctypes.data) % align
     return raw[start:start + nbytes].view(dtype).reshape(shape)
@@ -304,3 +305,11 @@ def scatter_occluded(packets, n):
     occluded = np.zeros(n, dtype=np.uint8)
     isa.module("_gather").scatter_occluded(packets.prim, packets.index, occluded)
     return occluded.view(bool)
+
+
+def add_unoccluded(radiance, slot, contribution, occluded):
+    """``radiance[slot[i]] += contribution[:, i]`` (float64 sums, in ray order) for every
+    shadow ray ``i`` that is not ``occluded``: ``np.add.at``'s result, without its cost."""
+    isa.module("_gather").add_unoccluded(
+        radiance, np.ascontiguousarray(slot, dtype=np.int32),
+        np.asarray(contribution, dtype=np.float32), np.asarray(occluded).view(np.uint8))

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from raysort.errors import ConfigError
-from raysort.rays import (MAX_PACKET, Hits, Packets, RayBatch, RayRow, gather, scatter,
-                          scatter_occluded)
+from raysort.rays import (MAX_PACKET, Hits, Packets, RayBatch, RayRow, add_unoccluded, gather,
+                          scatter, scatter_occluded)
 
 from _helpers import random_rays
 
@@ -400,3 +400,20 @@ def test_scatter_occluded(gathered):
     want = np.zeros(n, bool)
     want[ray] = np.isin(ray % 4, (1, 2))
     assert np.array_equal(occ, want)
+
+
+# -- shadow-ray radiance --------------------------------------------------------------
+
+def test_add_unoccluded_is_np_add_at():
+    """The same float64 sums as ``np.add.at`` (same order, repeated slots included)."""
+    rng = np.random.default_rng(5)
+    m, slots = 5000, 37
+    slot = rng.integers(0, slots, m).astype(np.int32)
+    contribution = rng.random((3, 2 * m), dtype=np.float32)[:, :m]      # strided, as shaders
+    occluded = rng.random(m) < 0.3
+    start = rng.random((slots, 3))
+    want = start.copy()
+    np.add.at(want, slot[~occluded], contribution[:, ~occluded].T)
+    got = start.copy()
+    add_unoccluded(got, slot, contribution, occluded)
+    assert np.array_equal(got.view(np.uint64), want.view(np.uint64))

@@ -43,6 +43,16 @@ cdef void make_rays(const float[::1] eye, const float[::1] fwd, const float[::1]
             out[RS_RAY_TMAX, i] = INFINITY
 
 
+def _generate(const float[::1] eye, const float[::1] fwd, const float[::1] right,
+              const float[::1] up, const int32_t[::1] pixels, const int32_t[::1] samples,
+              int width, int height, int strata, bint jitter, uint32_t seed,
+              float[:, ::1] out):
+    """Typed entry point: make the rays without the GIL."""
+    with nogil:
+        make_rays(eye, fwd, right, up, pixels, samples, width, height, strata, jitter, seed,
+                  out)
+
+
 class PinholeGenerator(Generator):
     """Pinhole-camera primary rays with jittered sub-pixel samples.
 
@@ -71,6 +81,6 @@ class PinholeGenerator(Generator):
         root = math.isqrt(spp)
         strata = root if root * root == spp else 1
         rays = RayBatch(len(pixels) * len(samples))
-        make_rays(eye, fwd, right, up, pixels, samples, width, height, strata, self.jitter,
+        _generate(eye, fwd, right, up, pixels, samples, width, height, strata, self.jitter,
                   seed & 0xFFFFFFFF, rays.data)
         return rays

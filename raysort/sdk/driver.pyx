@@ -6,6 +6,7 @@ releases the GIL and calls the kernel for each sub-packet, summing the Table I
 counters into a :class:`raysort.stats.Counters`.
 """
 from libc.stdlib cimport malloc, free
+from libc.string cimport memset
 from libc.stdint cimport int32_t, uint8_t
 from raysort._types cimport rs_node, rs_tri, rs_rays, rs_counters, RS_MAX_PACKET, rays_view
 
@@ -78,7 +79,7 @@ cdef object run(const Kernel *kernel, object bvh, object packets, bint any_hit,
     w.stack = block
     w.group_data = block + stack_size
     w.level_group_data = block + stack_size + groups_size
-    c.rays = c.ia = c.box1 = c.box4 = c.tri1 = c.tri4 = 0
+    memset(&c, 0, sizeof(c))       # every counter, including any a kernel adds
     try:
         with nogil:
             for k in range(n):

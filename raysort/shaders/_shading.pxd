@@ -69,6 +69,7 @@ cdef inline void cosine_direction(const float *nrm, float u1, float u2,
     cdef float aa = -1.0 / (sgn + nrm[2])
     cdef float bb = nrm[0] * nrm[1] * aa
     cdef float tx[3], ty[3]
+    cdef double cos_phi = cos(phi), sin_phi = sin(phi), along = sqrt(1.0 - u1)
     cdef int a
     tx[0] = 1.0 + sgn * nrm[0] * nrm[0] * aa
     tx[1] = sgn * bb
@@ -77,4 +78,4 @@ cdef inline void cosine_direction(const float *nrm, float u1, float u2,
     ty[1] = sgn + nrm[1] * nrm[1] * aa
     ty[2] = -nrm[1]
     for a in range(3):
-        w[a] = r * cos(phi) * tx[a] + r * sin(phi) * ty[a] + sqrt(1.0 - u1) * nrm[a]
+        w[a] = r * cos_phi * tx[a] + r * sin_phi * ty[a] + along * nrm[a]

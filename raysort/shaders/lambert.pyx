@@ -2,7 +2,7 @@
 from libc.math cimport sqrt, M_PI, INFINITY
 from libc.stdint cimport int32_t, uint32_t
 from raysort._rng cimport uniform
-from raysort._types cimport RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH
+from raysort._types cimport RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH, rs_prefetch
 from raysort.shaders._shading cimport leave_surface, cosine_direction, store_ray
 
 import numpy as np
@@ -11,6 +11,10 @@ from raysort.params import boolean, integer
 from raysort.paths import Bounce, ShadowRays
 from raysort.plugin import Shader
 from raysort.rays import RayBatch
+
+
+cdef enum:
+    PREFETCH_AHEAD = 8      # rays between a face-data prefetch and its use
 
 
 cdef struct ShadeParams:
@@ -37,6 +41,13 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
     cdef float nrm[3], o[3], w[3], u1, u2, q
     cdef float cosl, dist2, dist, wl[3], best
     for i in range(n):
+        if i + PREFETCH_AHEAD < n and prim[i + PREFETCH_AHEAD] >= 0:
+            # the face data of a ray further on, which its hit makes a random access
+            f = prim[i + PREFETCH_AHEAD]
+            rs_prefetch(&normals[f, 0])
+            rs_prefetch(&albedo[f, 0])
+            if prm.emissive:
+                rs_prefetch(&emission[f, 0])
         f = prim[i]
         if f < 0:
             for c in range(3):
@@ -151,12 +162,13 @@ class LambertShader(Shader):
             scene.face_normals(),
             np.ascontiguousarray([lt.position for lt in lights], dtype=np.float32).reshape(-1, 3),
             np.ascontiguousarray([lt.intensity for lt in lights], dtype=np.float32).reshape(-1, 3),
+            bool(scene.emission.any()),
         )
 
     def shade(self, scene, rays, hits, paths, depth, seed, radiance):
         if self._prepared is None or self._prepared[0] is not scene:
             self.prepare(scene)
-        _, normals, light_pos, light_int = self._prepared
+        _, normals, light_pos, light_int, emissive = self._prepared
         n = len(rays)
         next_rays = RayBatch(n)
         next_parent = np.empty(n, dtype=np.int32)
@@ -169,7 +181,7 @@ class LambertShader(Shader):
         k, m = _shade(rays.data, hits.t, hits.prim, normals, scene.albedo, scene.emission,
                       scene.sky, paths.pixel, paths.sample, paths.slot, paths.throughput,
                       depth, self.max_depth, seed & 0xFFFFFFFF, self.russian_roulette,
-                      self.rr_depth, bool(scene.emission.any()), light_pos, light_int,
+                      self.rr_depth, emissive, light_pos, light_int,
                       radiance, next_rays.data, next_parent, next_thr, sh_rays.data,
                       sh_parent, sh_slot, sh_contrib)
         shadow = None

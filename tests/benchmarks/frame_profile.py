@@ -1,0 +1,112 @@
+"""Where a frame's CPU goes, and what a second thread buys.
+
+Renders one scene with the default pipeline (``nah`` + ``wide`` + ``lambert``) and
+reports, from the render's own per-stage thread-CPU timers
+(``RenderStats.stage_seconds``), each stage's share of the frame's CPU and the
+framework's share (every stage but ``traverse``: shade, check, gather, sort,
+generate, scatter).  Then it times whole frames with 1 and 2 threads, interleaved in
+one process (a warm-up round, the order rotated every round) and prints medians with
+their spread and the per-round speed-up.  Images are compared bit for bit.
+
+    python tests/benchmarks/frame_profile.py                  # sibenik 512x512, 4 spp
+    python tests/benchmarks/frame_profile.py --size 1024 --spp 4 --rounds 5
+
+Run it on an otherwise idle machine: the thread speed-up needs two free cores.
+"""
+import argparse
+import os
+import platform
+import statistics
+import time
+
+import numpy as np
+
+import raysort
+from raysort import isa
+
+
+def cpu_name():
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def render(pipe, args):
+    start = time.perf_counter()
+    result = pipe.render(args.size, args.size, spp=args.spp, seed=1)
+    return result, time.perf_counter() - start
+
+
+def stage_table(stats):
+    total = sum(stats.stage_seconds.values())
+    print(f"  {'stage':<10}{'CPU s':>9}{'share':>8}")
+    for stage, seconds in sorted(stats.stage_seconds.items(), key=lambda kv: -kv[1]):
+        print(f"  {stage:<10}{seconds:9.3f}{seconds / total:8.1%}")
+    framework = total - stats.stage_seconds.get("traverse", 0.0)
+    print(f"  framework (all but traverse): {framework:.3f} s = {framework / total:.1%} of "
+          f"{total:.3f} CPU s")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("scene", nargs="?", default="sibenik")
+    parser.add_argument("--size", type=int, default=512, help="image edge in pixels (512)")
+    parser.add_argument("--spp", type=int, default=4, help="samples per pixel (4)")
+    parser.add_argument("--rounds", type=int, default=5, help="timed rounds (5)")
+    parser.add_argument("--no-threads", action="store_true", help="skip the 2-thread part")
+    args = parser.parse_args(argv)
+
+    scene = raysort.load_scene(args.scene)
+    pipes = {n: raysort.Pipeline(scene, threads=n) for n in (1, 2)}
+    pipes[1].bvh
+    pipes[2]._bvh = pipes[1].bvh        # one BVH for both (built once, read only)
+    pipes[1].bvh.wide
+    try:
+        load = os.getloadavg()
+    except OSError:
+        load = None
+    print(f"{args.scene} {args.size}x{args.size}, {args.spp} spp, "
+          f"{' + '.join(str(v) for v in pipes[1].describe().values())}")
+    print(f"machine: {cpu_name()} ({os.cpu_count()} cores), ISA {isa.active()}, "
+          f"load average before: {load}")
+
+    result, seconds = render(pipes[1], args)
+    print(f"\none thread: {seconds:.2f} s wall, {result.stats.total_rays:,} rays")
+    stage_table(result.stats)
+    if args.no_threads:
+        return
+
+    reference = result.image
+    walls = {1: [], 2: []}
+    ratios = []
+    for r in range(args.rounds + 1):             # round 0 is the warm-up
+        order = (1, 2) if r % 2 == 0 else (2, 1)
+        got = {}
+        for n in order:
+            res, got[n] = render(pipes[n], args)
+            assert np.array_equal(res.image, reference), f"{n} threads changed the image"
+        if r == 0:
+            continue
+        for n in (1, 2):
+            walls[n].append(got[n])
+        ratios.append(got[1] / got[2])
+    print(f"\nwhole frames, {args.rounds} rounds after a warm-up, order rotated:")
+    for n in (1, 2):
+        w = walls[n]
+        print(f"  {n} thread{'s' if n > 1 else ' '}: median {statistics.median(w):.3f} s "
+              f"(min {min(w):.3f}, max {max(w):.3f})")
+    print(f"  speed-up 2 threads / 1: median {statistics.median(ratios):.2f}x, per round "
+          f"{', '.join(f'{x:.2f}' for x in ratios)}")
+    try:
+        print(f"  load average after: {os.getloadavg()}")
+    except OSError:
+        pass
+
+
+if __name__ == "__main__":
+    main()
