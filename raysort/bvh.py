@@ -16,13 +16,25 @@ import numpy as np
 
 from raysort import _bvh
 from raysort._layout import NODE4_DTYPE, NODE8_DTYPE, NODE_DTYPE, TRI8_DTYPE, TRI_DTYPE
+from raysort.errors import ConfigError
 from raysort.mesh import check_mesh
 from raysort.params import integer, number
 from raysort.rays import aligned_empty
 
-__all__ = ["BVH", "Wide8", "NODE_DTYPE", "NODE4_DTYPE", "NODE8_DTYPE", "TRI_DTYPE",
+__all__ = ["BVH", "Wide8", "PRESETS", "NODE_DTYPE", "NODE4_DTYPE", "NODE8_DTYPE", "TRI_DTYPE",
            "TRI8_DTYPE", "prepare_triangles", "degenerate_faces"]
 
+#: named sets of build parameters (``BVH(..., preset="manta")``, ``bvh={"preset": "manta"}``,
+#: ``raysort bench --bvh manta``); parameters given next to a preset override it.
+PRESETS = {
+    # binned SAH with DynBVH's costs (C_trav = C_isec = 1): leaves of ~2 triangles
+    "default": {"max_leaf": 8, "bins": 16, "traversal_cost": 1.0},
+    # leaves of tens of triangles, as the paper's Manta counts imply: its Table I has
+    # about ten triangle tests per box test (Sibenik: 16 ranged, 5.5 partition, 7 ranged
+    # + sorting).  A node visit costing 64 triangle tests, leaves of up to 256, gives
+    # ~80 triangles per leaf on Sibenik and 10, 8.5 and 14 on its diffuse rays.
+    "manta": {"max_leaf": 256, "bins": 16, "traversal_cost": 64.0},
+}
 
 class Wide8(NamedTuple):
     """The BVH collapsed to 8-wide nodes (``BVH.wide8``, for the ``wide8`` traversal)."""
@@ -61,6 +73,10 @@ class BVH:
     ----------
     vertices : float32 (n, 3)
     faces : int32 (m, 3)
+    preset : str, default "default"
+        a named set of the parameters below (:data:`PRESETS`: ``"default"``, or
+        ``"manta"`` for leaves of tens of triangles as in the paper's Manta); the
+        parameters given override it.
     max_leaf : int, default 8
         a node with more triangles is always split.
     bins : int, default 16
@@ -91,10 +107,13 @@ class BVH:
     #: most triangles a wide8 leaf made of several binary leaves may hold
     WIDE8_MAX_LEAF = 32
 
-    def __init__(self, vertices, faces, *, max_leaf=8, bins=16, traversal_cost=1.0):
-        self.max_leaf = integer("max_leaf", max_leaf, 1, 65535)
-        self.bins = integer("bins", bins, 1, 64)
-        self.traversal_cost = number("traversal_cost", traversal_cost, 0, 1000, lo_open=True)
+    def __init__(self, vertices, faces, *, preset="default", max_leaf=None, bins=None,
+                 traversal_cost=None):
+        params = self.check_parameters(preset=preset, max_leaf=max_leaf, bins=bins,
+                                       traversal_cost=traversal_cost)
+        self.preset = preset
+        self.max_leaf, self.bins = params["max_leaf"], params["bins"]
+        self.traversal_cost = params["traversal_cost"]
         vertices, faces = check_mesh(vertices, faces)
         n = len(faces)
         nodes = np.zeros(2 * n, dtype=NODE_DTYPE)
@@ -109,6 +128,23 @@ class BVH:
         self._wide = None
         self._wide8 = None
         self._wide_lock = threading.Lock()
+
+    @staticmethod
+    def check_parameters(preset="default", **given):
+        """The build parameters of ``preset`` with those ``given`` (not None) on top,
+        checked; ConfigError naming the preset or parameter otherwise."""
+        if not isinstance(preset, str) or preset not in PRESETS:
+            raise ConfigError(f"bvh: unknown preset {preset!r} (presets: "
+                              f"{', '.join(PRESETS)})")
+        unknown = sorted(set(given) - set(PRESETS[preset]))
+        if unknown:
+            raise ConfigError(f"bvh: unknown parameter {unknown[0]!r} (BVH takes: preset, "
+                              f"{', '.join(PRESETS[preset])})")
+        p = {**PRESETS[preset], **{k: v for k, v in given.items() if v is not None}}
+        return {"max_leaf": integer("max_leaf", p["max_leaf"], 1, 65535),
+                "bins": integer("bins", p["bins"], 1, 64),
+                "traversal_cost": number("traversal_cost", p["traversal_cost"], 0, 1000,
+                                         lo_open=True)}
 
     @property
     def wide(self):

@@ -11,46 +11,13 @@ import contextlib
 import os
 import sys
 
+from raysort.argtypes import non_negative as _non_negative
+from raysort.argtypes import positive as _positive
+from raysort.argtypes import seed as _seed
+from raysort.argtypes import size as _size
 from raysort.errors import ConfigError, RaysortError
 
 __all__ = ["main"]
-
-
-def _size(text):
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 320x240, got {text!r}")
-    if w < 1 or h < 1 or w * h > 64 * 1024 * 1024:
-        raise argparse.ArgumentTypeError(f"image size {text!r} is out of range")
-    return w, h
-
-
-def _at_least(lo):
-    """An argparse type: a whole number >= lo."""
-    def parse(text):
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}")
-        if value < lo:
-            raise argparse.ArgumentTypeError(f"expected a number >= {lo}, got {value}")
-        return value
-    return parse
-
-
-_positive, _non_negative = _at_least(1), _at_least(0)
-
-
-def _seed(text):
-    """An argparse type: a seed, a whole number in 0..2**32-1 (the random numbers are keyed
-    on 32 bits, so a larger one would repeat another's image)."""
-    from raysort.pipeline import MAX_SEED
-
-    value = _non_negative(text)
-    if value > MAX_SEED:
-        raise argparse.ArgumentTypeError(f"expected a seed in 0..{MAX_SEED}, got {value}")
-    return value
 
 
 MAX_EXPOSURE = 64   # stops: 2**64 brightens the darkest float32 value past 1

@@ -239,7 +239,8 @@ class Pipeline:
         False skips the checks for raysort's own plugins marked trusted (plugins
         from other packages are always checked).
     bvh : dict, optional
-        BVH build parameters (``max_leaf``, ``bins``, ``traversal_cost``).
+        BVH build parameters (``preset``: ``"default"`` or ``"manta"`` for the paper's
+        big leaves; ``max_leaf``, ``bins``, ``traversal_cost``), see :class:`BVH`.
     """
 
     def __init__(self, scene=None, *, generator="pinhole", sorter="nah", traversal="wide8",

@@ -1,7 +1,16 @@
 """Helpers shared by test modules (importable because tests/ is on sys.path)."""
 import numpy as np
 
+import raysort
 from raysort.rays import RayBatch
+
+
+def exact_traversals():
+    """Installed traversals that promise brute force's hits bit for bit (``exact``);
+    outside libraries such as Embree declare ``exact = False`` and are held to a
+    tolerance in tests/traversals/test_inexact_traversals.py instead."""
+    return [name for name in raysort.available("traversals")
+            if raysort.load("traversals", name).exact]
 
 
 def random_rays(rng, n, bounds, *, spread=1.5):

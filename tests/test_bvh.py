@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 import raysort
-from raysort.bvh import BVH, NODE_DTYPE, TRI_DTYPE
+from raysort.bvh import BVH, NODE_DTYPE, PRESETS, TRI_DTYPE
 from raysort.errors import ConfigError, SceneError
 from raysort.rays import gather, scatter
 from raysort.reference import brute_force
 
-from _helpers import assert_same_hits, random_rays
+from _helpers import assert_same_hits, exact_traversals, random_rays
 
 
 # ---------------------------------------------------------------------------
@@ -140,6 +140,40 @@ def test_sibenik_builds_with_other_parameters(sibenik):
         check_structure(bvh, sibenik.vertices, sibenik.faces, params.get("max_leaf", 8))
 
 
+def test_manta_preset_builds_big_leaves_and_keeps_hits_exact(sibenik, rng):
+    """The "manta" preset (Table I's proportions) builds a valid tree with leaves of tens
+    of triangles; every exact traversal still returns brute force's hits on it."""
+    bvh = BVH(sibenik.vertices, sibenik.faces, preset="manta")
+    check_structure(bvh, sibenik.vertices, sibenik.faces, PRESETS["manta"]["max_leaf"])
+    default = BVH(sibenik.vertices, sibenik.faces)
+    assert bvh.stats()["mean_leaf_size"] > 10 * default.stats()["mean_leaf_size"]
+    assert (bvh.max_leaf, bvh.traversal_cost) == (PRESETS["manta"]["max_leaf"],
+                                                 PRESETS["manta"]["traversal_cost"])
+    rays = random_rays(rng, 256, bvh.bounds)
+    ref = brute_force(sibenik.vertices, sibenik.faces, rays)
+    for name in exact_traversals():
+        assert_same_hits(trace(name, bvh, rays, 64, rng), ref, f"{name} on manta leaves")
+
+
+def test_preset_parameters_are_overridden_by_given_ones():
+    bvh = BVH(TRI_V, TRI_F, preset="manta", max_leaf=4)
+    assert (bvh.preset, bvh.max_leaf, bvh.bins) == ("manta", 4, PRESETS["manta"]["bins"])
+    assert BVH(TRI_V, TRI_F).max_leaf == PRESETS["default"]["max_leaf"]
+
+
+@pytest.mark.parametrize("preset", ["nope", None, 3, ""])
+def test_unknown_preset_names_the_presets(preset):
+    with pytest.raises(ConfigError, match="unknown preset .*presets: default, manta"):
+        BVH(TRI_V, TRI_F, preset=preset)
+
+
+def test_pipeline_takes_a_preset(sibenik):
+    pipe = raysort.Pipeline(sibenik, bvh={"preset": "manta"})
+    assert pipe.bvh.preset == "manta"
+    with pytest.raises(ConfigError, match="unknown preset"):
+        raysort.Pipeline(sibenik, bvh={"preset": "nope"}).bvh
+
+
 @pytest.mark.parametrize("max_leaf,bins,cost", [
     (1, 16, 1.0), (2, 1, 1.0), (4, 64, 1.0), (8, 16, 1.0), (8, 3, 20.0), (16, 7, 0.25)])
 def test_random_soup_structure(rng, max_leaf, bins, cost):
@@ -221,7 +255,7 @@ def test_refit_soup(rng, motion):
     rays = random_rays(rng, 1500, bvh.bounds)
     ref = brute_force(W, F, rays)
     assert (ref.prim >= 0).sum() > 100
-    for name in raysort.available("traversals"):
+    for name in exact_traversals():
         assert_same_hits(trace(name, bvh, rays, 16, rng), ref, f"{name} after refit")
 
 
@@ -234,7 +268,7 @@ def test_refit_real_scene(sibenik, rng):
     check_structure(bvh, W, F, 8)
     rays = random_rays(rng, 256, bvh.bounds)
     ref = brute_force(W, F, rays)
-    for name in raysort.available("traversals"):
+    for name in exact_traversals():
         assert_same_hits(trace(name, bvh, rays, 64, rng), ref, f"{name} after refit")
 
 

@@ -86,14 +86,17 @@ def test_any_hit_matches_brute_force(embree_installed, sibenik, workloads):
 
 
 def test_render_and_bench_include_embree(embree_installed, sibenik):
-    from raysort.bench import default_configs, run_bench
+    from raysort.bench import load_table
+    from raysort.bench.configs import select
+    from raysort.bench.frame import run_frames
 
     result = raysort.Pipeline(sibenik, traversal="embree").render(24, 16, 1)
     ours = raysort.Pipeline(sibenik, traversal="ranged").render(24, 16, 1)
     assert np.abs(result.image - ours.image).mean() < 0.02 * ours.image.mean()
-    configs = [c for c in default_configs(extra_traversals=["embree"])
-               if c.label in ("ranged (8x8)", "embree")]
-    report = run_bench(["sibenik"], width=16, height=16, spp=1, configs=configs)
-    rows = {r["label"]: r for r in report["scenes"]["sibenik"]["configs"]}
+    table = load_table()
+    configs = select(table.frame_configs(), ["ranged (8x8)", "embree"])
+    report = run_frames(["sibenik"], configs, table, width=16, height=16, spp=1, repeat=1)
+    rows = {r["label"]: r for r in report["groups"]["sibenik"]["configs"]}
     assert rows["embree"]["counters_available"] is False
+    assert rows["embree"]["exact_traversal"] is False
     assert rows["embree"]["mrays_per_second"] > 0

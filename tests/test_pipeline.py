@@ -6,6 +6,8 @@ import raysort
 from raysort import output
 from raysort.errors import ConfigError, PluginContractError
 
+from _helpers import exact_traversals
+
 
 # --------------------------------------------------------------------------
 # analytic scenes
@@ -85,7 +87,7 @@ def sibenik_reference(sibenik):
     return _render(sibenik).image
 
 
-@pytest.mark.parametrize("traversal", raysort.available("traversals"))
+@pytest.mark.parametrize("traversal", exact_traversals())
 @pytest.mark.parametrize("sorter", ["none", "none:packet_size=1024", "nah", "nah_numpy"])
 def test_image_identical_for_every_sorter_and_traversal(sibenik, sibenik_reference,
                                                          traversal, sorter):
@@ -93,7 +95,7 @@ def test_image_identical_for_every_sorter_and_traversal(sibenik, sibenik_referen
     assert np.array_equal(image.view(np.uint32), sibenik_reference.view(np.uint32))
 
 
-@pytest.mark.parametrize("traversal", raysort.available("traversals"))
+@pytest.mark.parametrize("traversal", exact_traversals())
 def test_shadow_rays_identical_for_every_traversal(sibenik, traversal):
     """Shadow rays use the any-hit path of each traversal."""
     base = _render(sibenik, shader={"type": "lambert", "shadow_rays": True}, size=(24, 16))

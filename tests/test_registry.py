@@ -159,8 +159,8 @@ def test_builtins_are_discovered_from_entry_points(kind, fresh):
 def test_available_is_sorted_and_rejects_unknown_kinds(fresh):
     """Names come sorted; a misspelt kind is a ConfigError listing the four kinds."""
     names = raysort.available("traversals")
-    assert names == sorted(names) == ["masked", "partition", "ranged", "single", "stream", "wide",
-                                      "wide8"]
+    assert names == sorted(names)
+    assert BUILTINS["traversals"] <= set(names)     # and any installed outside plugins
     with pytest.raises(ConfigError, match="kinds are: generators, sorters, traversals, shaders"):
         raysort.available("sorter")
 

@@ -1,13 +1,12 @@
 """Whole frames of the paper's experiment (depth 2, no shadow rays, 128x128, 2 spp)
 per scene and configuration, the same configurations as ``raysort bench``
-(Embree included when raysort-embree is installed)."""
+(every installed traversal, yardsticks included)."""
 import pytest
 
 import raysort
-from raysort.bench import default_configs
+from raysort.bench import load_table
 
-EXTRA = ["embree"] if "embree" in raysort.available("traversals") else []
-CONFIGS = {c.label: c for c in default_configs(extra_traversals=EXTRA)}
+CONFIGS = {c.label: c for c in load_table().frame_configs()}
 
 
 @pytest.mark.parametrize("label", list(CONFIGS))
@@ -16,7 +15,7 @@ def test_render(benchmark, scene_cache, scene_name, label):
     config = CONFIGS[label]
     pipe = raysort.Pipeline(scene_cache(scene_name),
                             shader={"type": "lambert", "max_depth": 2, "shadow_rays": False},
-                            **config.pipeline_args())
+                            traversal=config.traversal, sorter=config.sorter)
     results = []
     benchmark.group = f"{scene_name}: render"
     benchmark.pedantic(lambda: results.append(pipe.render(128, 128, 2, 0)), rounds=3,

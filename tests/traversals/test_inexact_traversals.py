@@ -45,3 +45,40 @@ def test_inexact_traversal_within_tolerance(name, kind, real_scene, workloads):
     trav.intersect(bvh, packets, any_hit=True)
     occluded = scatter_occluded(packets, n)
     assert np.mean(occluded != (ref.prim >= 0)) <= 1e-3
+
+
+@pytest.mark.skipif(not INEXACT, reason="no inexact traversal is installed")
+@pytest.mark.parametrize("name", INEXACT or ["none"])
+@pytest.mark.parametrize("tmin", [0.0, 0.5])
+def test_a_ray_starting_on_a_triangle_does_not_hit_it_at_its_start(name, tmin):
+    """raysort counts hits with t > tmin only.  A library whose tnear is inclusive
+    (Embree's) reports t = tmin on the triangle a ray starts on; the plugin must not."""
+    # a floor (z = 0) over [-4, 4]^2 and a wide ceiling (z = 2)
+    v = np.array([[-4, -4, 0], [4, -4, 0], [4, 4, 0], [-4, 4, 0],
+                  [-1e3, -1e3, 2], [1e3, -1e3, 2], [1e3, 1e3, 2], [-1e3, 1e3, 2]], np.float32)
+    f = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]], np.int32)
+    rng = np.random.default_rng(5)
+    n = 256
+    start = np.column_stack([rng.uniform(-3, 3, (n, 2)), np.zeros(n)]).astype(np.float32)
+    d = rng.normal(size=(n, 3)).astype(np.float32)
+    d[:, 2] = np.abs(d[:, 2]) + 0.2                 # away from the floor, up to the ceiling
+    rays = raysort.RayBatch.from_arrays(start - tmin * d, d, tmin=tmin)
+    bvh = raysort.BVH(v, f)
+    ref = brute_force(v, f, rays)
+    assert (ref.prim >= 2).all()                     # brute force: the ceiling, every ray
+    order = np.arange(n, dtype=np.int32)
+    packets = gather(rays, order, np.array([0, n], np.int32))
+    raysort.create("traversals", name).intersect(bvh, packets)
+    hits = scatter(packets, n)
+    assert (hits.prim >= 2).all(), f"{name}: hits at the ray's start"
+    assert np.allclose(hits.t, ref.t, rtol=1e-4)
+
+
+@pytest.mark.skipif(not INEXACT, reason="no inexact traversal is installed")
+@pytest.mark.parametrize("name", INEXACT or ["none"])
+def test_inexact_traversal_renders_nearly_the_same_image(name, sibenik):
+    """A whole render (closest-hit and shadow rays) through the pipeline's checks."""
+    shader = {"type": "lambert", "shadow_rays": True}
+    ours = raysort.Pipeline(sibenik, traversal="single", shader=shader).render(24, 16, 1)
+    theirs = raysort.Pipeline(sibenik, traversal=name, shader=shader).render(24, 16, 1)
+    assert np.abs(theirs.image - ours.image).mean() < 0.02 * ours.image.mean()

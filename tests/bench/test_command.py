@@ -1,0 +1,203 @@
+"""``raysort bench`` end to end on tiny scenes: image check, exit status, --only, JSON."""
+import json
+
+import pytest
+
+import raysort
+from raysort.bench.report import SCHEMA
+from raysort.cli import main
+from raysort.sdk import Counters, Traversal
+
+TINY = ["--size", "16x16", "--spp", "1", "--depth", "1", "--repeat", "2", "-q"]
+
+
+class Blind(Traversal):
+    """Claims to be exact but never finds a hit: a deliberately different image."""
+
+    def intersect(self, bvh, packets, any_hit=False):
+        return Counters()
+
+
+class BlindInexact(Blind):
+    exact = False
+
+
+@pytest.fixture
+def blind():
+    raysort.register("traversals", "bench_blind", Blind)
+    raysort.register("traversals", "bench_blind_inexact", BlindInexact)
+    yield
+    raysort.unregister("traversals", "bench_blind")
+    raysort.unregister("traversals", "bench_blind_inexact")
+
+
+def bench(tmp_path, monkeypatch, *args):
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "out.json"
+    status = main(["bench", *args, *TINY, "--json", str(out)])
+    return status, (json.loads(out.read_text()) if out.exists() else None)
+
+
+def test_json_keeps_every_round_and_the_orders(tmp_path, monkeypatch, capsys):
+    status, rep = bench(tmp_path, monkeypatch, "plane", "cornell",
+                        "--only", "ranged (8x8),ranged + nah,single")
+    assert status == 0
+    assert rep["schema"] == SCHEMA and rep["kind"] == "frame"
+    assert set(rep["machine"]) >= {"cpu", "cores", "isa", "isas_compiled"}
+    assert len(rep["load"]["before"]) == 3 and len(rep["load"]["after"]) == 3
+    s = rep["settings"]
+    assert (s["width"], s["height"], s["spp"], s["repeat"], s["warmup"]) == (16, 16, 1, 2, True)
+    assert list(rep["groups"]) == ["plane", "cornell"]
+    for g in rep["groups"].values():
+        assert len(g["orders"]) == 2
+        assert all(sorted(o) == sorted(r["label"] for r in g["configs"]) for o in g["orders"])
+        assert [r["label"] for r in g["configs"]] == ["ranged (8x8)", "ranged + nah", "single"]
+        for r in g["configs"]:
+            assert len(r["rounds"]) == 2 and len(r["speedup_rounds"]) == 2
+            assert r["seconds"]["median"] == pytest.approx(sorted(r["rounds"])[0] / 2
+                                                           + sorted(r["rounds"])[1] / 2)
+            assert r["seconds"]["min"] == min(r["rounds"])
+            assert r["speedup_rounds"] == pytest.approx(
+                [b / t for b, t in zip(g["configs"][0]["rounds"], r["rounds"])])
+            assert r["baseline"] == "ranged (8x8)" and r["identical_image"] is True
+            assert r["rays"] > 0 and r["counters_available"]
+            assert set(r["counters_per_ray"]) == {"ia", "box1", "box4", "tri1", "tri4"}
+            assert r["sort_share"] >= 0
+        assert g["configs"][0]["speedup_rounds"] == [1.0, 1.0]
+    text = capsys.readouterr().out
+    assert "median [min-max]" in text and "order shuffled per round (seed 0)" in text
+
+
+def test_an_exact_configuration_with_another_image_fails_the_bench(tmp_path, monkeypatch,
+                                                                   capsys, blind):
+    status, rep = bench(tmp_path, monkeypatch, "plane", "--add", "blind", "bench_blind", "none",
+                        "--only", "ranged (8x8),blind")
+    assert status == 1
+    rows = {r["label"]: r for r in rep["groups"]["plane"]["configs"]}
+    assert rows["blind"]["identical_image"] is False
+    assert rows["blind"]["max_image_difference"] > 0
+    assert rows["ranged (8x8)"]["identical_image"] is True
+    out = capsys.readouterr().out
+    assert "DIFFERS" in out and "ERROR" in out and "blind" in out
+
+
+def test_an_inexact_configuration_may_differ(tmp_path, monkeypatch, capsys, blind):
+    status, rep = bench(tmp_path, monkeypatch, "plane", "--add", "blind", "bench_blind_inexact",
+                        "none", "--only", "ranged (8x8),blind")
+    assert status == 0
+    row = rep["groups"]["plane"]["configs"][1]
+    assert row["exact_traversal"] is False and row["identical_image"] is False
+    assert "inexact, max diff" in capsys.readouterr().out
+
+
+def test_only_runs_the_named_configurations_in_that_order(tmp_path, monkeypatch):
+    status, rep = bench(tmp_path, monkeypatch, "plane", "--only", "single,ranged + nah")
+    assert status == 0
+    rows = rep["groups"]["plane"]["configs"]
+    assert [r["label"] for r in rows] == ["single", "ranged + nah"]
+    # the table's baseline is not among them: the first one is
+    assert {r["baseline"] for r in rows} == {"single"}
+
+
+def test_unknown_label_or_plugin_is_one_line_exit_2(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["bench", "plane", *TINY, "--only", "nope"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown configuration 'nope'" in err[0]
+    assert main(["bench", "plane", *TINY, "--traversals", "no_such"]) == 2
+    assert "no_such" in capsys.readouterr().err
+    assert main(["bench", "plane", *TINY, "--bvh", "nonsense"]) == 2
+    assert "unknown preset 'nonsense'" in capsys.readouterr().err
+
+
+def test_list_prints_the_configurations_without_running(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["bench", "--list", "--sorters", "all", "--traversals", "single"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == len(raysort.available("sorters"))
+    assert all(line.startswith("single + ") for line in lines)
+
+
+def test_manta_bvh_preset_gives_the_same_images(tmp_path, monkeypatch):
+    status, rep = bench(tmp_path, monkeypatch, "cornell", "--bvh", "manta",
+                        "--only", "ranged (8x8),ranged + nah,partition (32x32)")
+    assert status == 0
+    g = rep["groups"]["cornell"]
+    assert rep["settings"]["bvh"] == {"preset": "manta"}
+    assert all(r["identical_image"] for r in g["configs"])
+
+
+def test_kernels_table_every_traversal_and_layout(tmp_path, monkeypatch, capsys, blind):
+    status, rep = bench(tmp_path, monkeypatch, "cornell", "--kernels",
+                        "--workloads", "primary,diffuse", "--traversals",
+                        "single,ranged,bench_blind_inexact")
+    assert status == 0
+    assert rep["kind"] == "kernels"
+    assert list(rep["groups"]) == ["cornell primary", "cornell diffuse:depth=1"]
+    for g in rep["groups"].values():
+        rows = {r["label"]: r for r in g["configs"]}
+        assert len(rows) == 9
+        assert all(rows[f"{t} / {p}"]["identical_hits"] for t in ("single", "ranged")
+                   for p in ("8x8", "32x32", "nah"))
+        assert rows["bench_blind_inexact / nah"]["identical_hits"] is False
+        assert all(len(r["rounds"]) == 2 and r["sort_seconds"]["median"] >= 0
+                   for r in g["configs"])
+    out = capsys.readouterr().out
+    assert "Mrays/s (median)" in out and "bench_blind_inexa" in out
+
+
+def test_kernels_an_exact_traversal_with_other_hits_fails(tmp_path, monkeypatch, blind):
+    status, rep = bench(tmp_path, monkeypatch, "plane", "--kernels", "--workloads", "primary",
+                        "--traversals", "single,bench_blind")
+    assert status == 1
+
+
+def test_chart_bars_and_heat_map(tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    monkeypatch.chdir(tmp_path)
+    assert main(["bench", "plane", *TINY, "--only", "ranged (8x8),single",
+                 "--chart", "bars.png"]) == 0
+    assert main(["bench", "plane", *TINY, "--sorters", "none,nah", "--traversals",
+                 "single,ranged", "--chart", "heat.png"]) == 0
+    for name in ("bars.png", "heat.png"):
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_baseline_names_the_configuration_speedups_are_taken_over(tmp_path, monkeypatch):
+    status, rep = bench(tmp_path, monkeypatch, "plane", "--only",
+                        "ranged (8x8),partition (32x32),ranged + nah",
+                        "--baseline", "partition (32x32)")
+    assert status == 0
+    rows = {r["label"]: r for r in rep["groups"]["plane"]["configs"]}
+    assert {r["baseline"] for r in rows.values()} == {"partition (32x32)"}
+    assert rows["ranged + nah"]["speedup_rounds"] == pytest.approx(
+        [p / t for p, t in zip(rows["partition (32x32)"]["rounds"],
+                               rows["ranged + nah"]["rounds"])])
+
+
+def test_kernels_matrix_of_sorters_and_traversals_per_workload(tmp_path, monkeypatch, capsys):
+    status, rep = bench(tmp_path, monkeypatch, "cornell", "--kernels", "--sorters", "none,nah",
+                        "--traversals", "single,ranged",
+                        "--workloads", "diffuse,diffuse:depth=2,shadow")
+    assert status == 0
+    assert list(rep["groups"]) == ["cornell diffuse:depth=1", "cornell diffuse:depth=2",
+                                   "cornell shadow:depth=0"]
+    for g in rep["groups"].values():
+        rows = {r["label"]: r for r in g["configs"]}
+        assert set(rows) == {"single + none", "single + nah", "ranged + none", "ranged + nah"}
+        assert rows["ranged + nah"]["baseline"] == "ranged + none"
+        assert all(r["identical_hits"] for r in rows.values())
+    assert rep["groups"]["cornell shadow:depth=0"]["any_hit"] is True
+
+
+def test_compared_pairs_are_per_round_ratios_too(tmp_path, monkeypatch, capsys):
+    status, rep = bench(tmp_path, monkeypatch, "plane", "--only",
+                        "ranged (8x8),partition (32x32),ranged + nah")
+    g = rep["groups"]["plane"]
+    rows = {r["label"]: r for r in g["configs"]}
+    (pair,) = [c for c in g["comparisons"] if c["label"] == "ranged + nah"]
+    assert pair["over"] == "partition (32x32)"
+    assert pair["speedup_rounds"] == pytest.approx(
+        [p / t for p, t in zip(rows["partition (32x32)"]["rounds"],
+                               rows["ranged + nah"]["rounds"])])
+    assert "ranged + nah over partition (32x32):" in capsys.readouterr().out
