@@ -26,13 +26,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import statistics
 import sys
 import time
 
 import raysort
 from raysort import isa
+from raysort.bench.report import machine_info
 from raysort.workloads import camera_rays, workload
 
 DEFAULT_CONFIGS = ["nah+wide8", "none+wide8", "two_point+wide8", "nah+wide", "none+wide",
@@ -41,14 +41,8 @@ CLOCKS = {"cpu": time.thread_time, "wall": time.perf_counter}
 
 
 def machine():
-    model = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as fh:
-            model = next(line.split(":", 1)[1].strip() for line in fh
-                         if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    return {"cpu": model, "isa": isa.active(), "isa_info": isa.info()}
+    """The bench's machine record (CPU, cores, versions, ISA), with the ISA details."""
+    return {**machine_info(), "isa_info": isa.info()}
 
 
 def parse_config(text):

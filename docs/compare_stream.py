@@ -26,24 +26,18 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import statistics
 import sys
 
 import raysort
 from raysort import isa
+from raysort.bench.report import machine_info
 from raysort.workloads import workload
 
 
 def machine():
-    model = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as fh:
-            model = next(line.split(":", 1)[1].strip() for line in fh
-                         if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    return {"cpu": model, "isa": isa.active(), "python": platform.python_version()}
+    """The bench's machine record (CPU, cores, versions, ISA), with the ISA details."""
+    return {**machine_info(), "isa_info": isa.info()}
 
 
 def parse_config(text):

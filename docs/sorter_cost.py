@@ -32,27 +32,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import statistics
 import sys
 import time
 
 import raysort
 from raysort import isa
+from raysort.bench.report import machine_info
 from raysort.rays import gather
 from raysort.workloads import workload
 
 
 def machine():
-    """CPU model and the compiled SIMD path, for the report's header."""
-    model = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as fh:
-            model = next(line.split(":", 1)[1].strip() for line in fh
-                         if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    return {"cpu": model, "isa": isa.active(), "isa_info": isa.info()}
+    """The bench's machine record (CPU, cores, versions, ISA), with the ISA details."""
+    return {**machine_info(), "isa_info": isa.info()}
 
 
 def measure(scene_name, sorters, traversals, rounds, size, depth, clock=time.thread_time):
