@@ -7,7 +7,12 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["size", "at_least", "positive", "non_negative", "seed"]
+__all__ = ["size", "at_least", "positive", "non_negative", "seed", "SCHEDULER_HELP"]
+
+SCHEDULER_HELP = ("render on Dask (needs raysort[distributed]): the address of a running "
+                  "scheduler (tcp://HOST:8786), or local[:N] for N single-threaded worker "
+                  "processes here (default: one per core); --threads does not apply")
+
 
 
 def size(text):

@@ -7,10 +7,10 @@ traceback; output files are written whole or not at all.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
 import sys
 
+from raysort.argtypes import SCHEDULER_HELP
 from raysort.argtypes import non_negative as _non_negative
 from raysort.argtypes import positive as _positive
 from raysort.argtypes import seed as _seed
@@ -131,6 +131,8 @@ def cmd_render(args):
                     traversal=args.traversal, shader=_shader_config(args), tile=args.tile,
                     threads=args.threads)
     width, height = args.size
+    from raysort.distributed import dask_client
+
     with dask_client(args.scheduler) as client:
         progress = Progress(f"render {pipe.scene.name}", unit="tile", enabled=not args.quiet)
         try:
@@ -145,20 +147,6 @@ def cmd_render(args):
                                       "stats": result.stats.as_dict()})
     _print_summary(result, out, args.stats, created=created)
     return 0
-
-
-SCHEDULER_HELP = ("render on Dask (needs raysort[distributed]): the address of a running "
-                  "scheduler (tcp://HOST:8786), or local[:N] for N single-threaded worker "
-                  "processes here (default: one per core); --threads does not apply")
-
-
-def dask_client(scheduler):
-    """A context giving the Dask client of ``--scheduler``, or None without one."""
-    if scheduler is None:
-        return contextlib.nullcontext()
-    from raysort.distributed import connect
-
-    return connect(scheduler)
 
 
 # --------------------------------------------------------------------------

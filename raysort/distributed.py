@@ -53,7 +53,7 @@ from dataclasses import replace
 from raysort import registry
 from raysort.errors import ClusterError, ConfigError, PluginError
 
-__all__ = ["connect", "render_tiles", "finished", "worker_threads", "tiles_per_task", "scene_key",
+__all__ = ["connect", "dask_client", "render_tiles", "finished", "worker_threads", "tiles_per_task", "scene_key",
            "send_scene", "pipeline_recipe", "worker_pipeline", "worker_info", "cache_info"]
 
 INSTALL = "pip install 'raysort[distributed]'"
@@ -201,7 +201,9 @@ def pipeline_recipe(pipe):
     recipe = {kind: _plugin_config(kind, getattr(pipe, kind)) for kind in _KINDS}
     recipe.update(tile=pipe.tile, batch_rays=pipe.batch_rays,
                   check_plugins=pipe.check_plugins, bvh=dict(pipe.bvh_params))
-    return {"pipeline": recipe, "raysort": raysort.__version__}
+    # the class travels by reference (its module and name), so this module needs no
+    # import of raysort.pipeline, which imports it
+    return {"pipeline": recipe, "raysort": raysort.__version__, "factory": type(pipe)}
 
 
 def _plugin_config(kind, plugin):
@@ -349,7 +351,6 @@ def worker_pipeline(scene, key, recipe):
     process); later tasks reuse it.
     """
     import raysort
-    from raysort.pipeline import Pipeline
 
     ident = (key, repr(sorted(recipe["pipeline"].items())))
     with _LOCK:
@@ -363,7 +364,7 @@ def worker_pipeline(scene, key, recipe):
                               f"{recipe['raysort']}; install the same version everywhere")
         scene = _remember(_SCENES, key, _SCENES.get(key) or _without_bvh(scene), MAX_SCENES)
         try:
-            pipe = Pipeline(scene, **recipe["pipeline"])
+            pipe = recipe["factory"](scene, **recipe["pipeline"])
         except PluginError as exc:
             raise type(exc)(f"{where}: {exc}; install the plugin's package on every worker",
                             kind=exc.kind, name=exc.name, distribution=exc.distribution) \
@@ -392,3 +393,11 @@ def _render_group(scene, key, recipe, group, width, height, spp, seed):
     """A task: render a group of tiles with the worker's cached pipeline."""
     pipe = worker_pipeline(scene, key, recipe)
     return [(tile, pipe._render_tile(tile, width, height, spp, seed)) for tile in group]
+
+
+def dask_client(scheduler):
+    """A context giving the Dask client of ``--scheduler`` (see :func:`connect`), or None
+    without one."""
+    if scheduler is None:
+        return contextlib.nullcontext()
+    return connect(scheduler)

@@ -293,7 +293,10 @@ def format_table(rows, stream=None):
 # --------------------------------------------------------------------------
 
 def add_parser(sub):
-    from raysort.cli import SCHEDULER_HELP, _non_negative, _positive, _size
+    from raysort.argtypes import SCHEDULER_HELP
+    from raysort.argtypes import non_negative as _non_negative
+    from raysort.argtypes import positive as _positive
+    from raysort.argtypes import size as _size
 
     s = sub.add_parser("sweep", help="time a matrix of configurations against a baseline, "
                                      "here or on a Dask cluster",
@@ -325,7 +328,7 @@ def add_parser(sub):
 
 def cmd_sweep(args):
     from raysort import output
-    from raysort.cli import dask_client
+    from raysort.distributed import dask_client
     from raysort.progress import Progress
 
     for path in (args.output, args.csv):
