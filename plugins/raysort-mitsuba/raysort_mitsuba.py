@@ -13,15 +13,12 @@ import weakref
 
 import numpy as np
 
-from raysort.sdk import Counters, Traversal
+from raysort.sdk import LibraryTraversal
 
 __all__ = ["MitsubaTraversal", "VARIANT"]
 
 #: the Mitsuba variant used: vectorised over rays (LLVM), RGB, differentiable build
 VARIANT = "llvm_ad_rgb"
-#: see EmbreeTraversal: a hit at t <= 0 from the shifted origin is traced again from
-#: a little further along the ray, this many times, NUDGE times the origin's magnitude
-NUDGES, NUDGE = 4, 2.0 ** -20
 
 _lock = threading.Lock()
 _scenes = weakref.WeakKeyDictionary()
@@ -79,7 +76,7 @@ def _query(scene, o, d, far, any_hit):
     return np.where(hit, t, np.float32(np.inf)), prim, uv[0], uv[1]
 
 
-class MitsubaTraversal(Traversal):
+class MitsubaTraversal(LibraryTraversal):
     """Mitsuba 3's ``ray_intersect_preliminary`` / ``ray_test`` over its own BVH, one thread.
 
     The first call on a BVH builds a Mitsuba scene from its vertices and faces
@@ -96,41 +93,8 @@ class MitsubaTraversal(Traversal):
     ==========  ======  =======  ==========================================
     """
 
-    exact = False
+    def scene(self, bvh):
+        return _scene(bvh)
 
-    def intersect(self, bvh, packets, any_hit=False):
-        lanes = np.flatnonzero((packets.index >= 0) & packets.active())
-        if len(lanes) == 0:
-            return Counters(available=False)
-        tmin, tmax = packets.tmin[lanes], packets.t[lanes]
-        start = np.where(tmin > 0, tmin, np.float32(0)).astype(np.float32)
-        d = np.ascontiguousarray(packets.directions[:, lanes].T)
-        o = np.ascontiguousarray((packets.origins[:, lanes] + start * packets.directions[:, lanes]).T)
-        far = np.ascontiguousarray(np.minimum(tmax - start, np.float32(1e37)), np.float32)
-        scene = _scene(bvh)
-        t, prim, u, v = _query(scene, o, d, far, any_hit)
-        if not any_hit:
-            again = np.flatnonzero((prim >= 0) & (t <= 0))
-            step = NUDGE * (np.abs(o).max(axis=1) + 1) / np.maximum(
-                np.linalg.norm(d, axis=1), np.float32(1e-30))
-            for _ in range(NUDGES):
-                if len(again) == 0:
-                    break
-                shift = step[again].astype(np.float32)
-                o2 = np.ascontiguousarray(o[again] + shift[:, None] * d[again], np.float32)
-                t2, p2, u2, v2 = _query(scene, o2, d[again], far[again] - shift, False)
-                t[again], prim[again], u[again], v[again] = t2 + shift, p2, u2, v2
-                step[again] *= 2
-                again = again[(p2 >= 0) & (t2 <= 0)]
-            prim[again] = -1
-        hit = prim >= 0
-        got = lanes[hit]
-        if any_hit:
-            packets.prim[got] = 0
-            packets.t[got] = -np.inf
-        else:
-            packets.prim[got] = prim[hit]
-            packets.t[got] = t[hit] + start[hit]
-            packets.u[got] = u[hit]
-            packets.v[got] = v[hit]
-        return Counters(rays=len(lanes), available=False)
+    def query(self, scene, origins, directions, far, any_hit):
+        return _query(scene, origins, directions, far, any_hit)

@@ -9,7 +9,9 @@ built against :func:`get_include`)::
 
 * **base classes** of the four plugin kinds, and the containers they read and
   write (:class:`RayBatch`, :class:`Packets`, :class:`Hits`, :class:`Paths`,
-  :class:`Bounce`, :class:`ShadowRays`, :class:`Counters`);
+  :class:`Bounce`, :class:`ShadowRays`, :class:`Counters`), and
+  :class:`LibraryTraversal`, the base of a traversal answered by an outside ray
+  tracer (subclasses give its scene and query; see raysort-embree);
 * **packet helpers** (:func:`fixed_packets`), the row indices of ray batches
   and gathered packets (:class:`RayRow`, :class:`PacketRow`; prefer the named
   views such as ``packets.t``) and layout limits (:data:`MAX_PACKET`), all
@@ -29,6 +31,7 @@ from raysort.params import boolean, integer, number, vector3
 from raysort.paths import Bounce, Paths, ShadowRays
 from raysort.plugin import Generator, Shader, Sorter, Traversal
 from raysort.rays import MAX_PACKET, Hits, PacketRow, Packets, RayBatch, RayRow
+from raysort.sdk.library import LibraryTraversal
 from raysort.sdk.packets import fixed_packets
 from raysort.stats import Counters
 
@@ -41,7 +44,7 @@ def get_include():
 
 
 __all__ = [
-    "Generator", "Sorter", "Traversal", "Shader",
+    "Generator", "Sorter", "Traversal", "Shader", "LibraryTraversal",
     "RayBatch", "Packets", "Hits", "Paths", "Bounce", "ShadowRays", "Counters",
     "MAX_PACKET", "RayRow", "PacketRow", "fixed_packets",
     "integer", "number", "boolean", "vector3",
