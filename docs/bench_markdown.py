@@ -12,22 +12,17 @@ import sys
 
 import numpy as np
 
+from raysort.bench import report
 from raysort.bench.report import pivot
 from raysort.stats import COUNTER_LABELS
 
 
 def spread(s, fmt="{:.3f}"):
-    return f"{fmt.format(s['median'])} [{fmt.format(s['min'])}–{fmt.format(s['max'])}]"
+    return report.spread(s, fmt, dash="–")
 
 
 def check(r):
-    same = r["identical_image"] if r["identical_image"] is not None else r["identical_hits"]
-    if same:
-        return "same"
-    if r["exact_traversal"]:
-        return "**DIFFERS**"
-    diff = r.get("max_image_difference")
-    return "inexact" + (f" (max {diff:.2g})" if diff is not None else "")
+    return report.check_label(r, differs="**DIFFERS**", inexact=" (max {:.2g})")
 
 
 def table(group, kind):

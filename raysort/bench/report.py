@@ -119,18 +119,20 @@ def failures(report):
 # text
 # --------------------------------------------------------------------------
 
-def _spread(s, fmt):
-    return f"{fmt.format(s['median'])} [{fmt.format(s['min'])}-{fmt.format(s['max'])}]"
+def spread(s, fmt="{:.3f}", dash="-"):
+    """``median [min-max]`` of a summary (the Markdown tables use an en dash)."""
+    return f"{fmt.format(s['median'])} [{fmt.format(s['min'])}{dash}{fmt.format(s['max'])}]"
 
 
-def _check(r):
+def check_label(r, differs="DIFFERS", inexact=", max diff {:.2g}"):
+    """``same``, ``DIFFERS`` (an exact configuration that did not match) or ``inexact``."""
     same = r["identical_image"] if r["identical_image"] is not None else r["identical_hits"]
     if same:
         return "same"
     if r["exact_traversal"]:
-        return "DIFFERS"
-    diff = r["max_image_difference"]
-    return "inexact" + (f", max diff {diff:.2g}" if diff is not None else "")
+        return differs
+    diff = r.get("max_image_difference")
+    return "inexact" + (inexact.format(diff) if diff is not None else "")
 
 
 def format_report(report, stream=None):
@@ -163,11 +165,11 @@ def format_report(report, stream=None):
             f"{'speedup [min-max]':>20} {'over':>{min(width, 18)}} {'sort':>6}  check")
         for r in rows:
             share = f"{100 * r['sort_share']:5.1f}%" if r["sort_share"] is not None else "   n/a"
-            say(f"  {r['label']:{width}} {_spread(r['seconds'], '{:.3f}'):>23} "
-                f"{r['mrays_per_second']:8.2f} {_spread(r['speedup'], '{:.2f}'):>20} "
-                f"{r['baseline'][:18]:>{min(width, 18)}} {share}  {_check(r)}")
+            say(f"  {r['label']:{width}} {spread(r['seconds'], '{:.3f}'):>23} "
+                f"{r['mrays_per_second']:8.2f} {spread(r['speedup'], '{:.2f}'):>20} "
+                f"{r['baseline'][:18]:>{min(width, 18)}} {share}  {check_label(r)}")
         for c in g.get("comparisons", []):
-            say(f"  {c['label']} over {c['over']}: {_spread(c['speedup'], '{:.2f}')}x "
+            say(f"  {c['label']} over {c['over']}: {spread(c['speedup'], '{:.2f}')}x "
                 f"(median of per-round ratios)")
         _format_counters(rows, say)
         if any(r["row"] for r in rows):
