@@ -32,6 +32,11 @@ run kernels sibenik --kernels --workloads primary,diffuse --repeat 5
 # 4. the matrix of sorters x traversals, first and second bounce and shadow rays
 run matrix sibenik --kernels --sorters all --traversals all \
     --workloads diffuse,diffuse:depth=2,shadow --repeat 3 --chart "$out/matrix.png"
+run matrix-sponza sponza --kernels --sorters all --traversals all \
+    --workloads diffuse,diffuse:depth=2,shadow --repeat 3 --chart "$out/matrix-sponza.png"
+# the forest has no point light: no shadow rays
+run matrix-forest forest --kernels --sorters all --traversals all \
+    --workloads diffuse,diffuse:depth=2 --repeat 3 --chart "$out/matrix-forest.png"
 # 5. peak memory of a 1024x1024 render on two threads, 4 and 1 samples per pixel
 python docs/peak_memory.py raysort render sibenik --size 1024x1024 --spp 4 --threads 2 \
     --sorter nah --traversal partition -q | tee "$out/memory.txt"
