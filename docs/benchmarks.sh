@@ -45,4 +45,4 @@ python docs/peak_memory.py raysort render sibenik --size 1024x1024 --spp 1 --thr
 uptime | tee -a "$out/load.txt"
 # the Markdown tables of BENCHMARKS.md, from the JSON above
 python docs/bench_markdown.py "$out"/frame.json "$out"/manta.json "$out"/kernels.json \
-    "$out"/matrix.json > "$out/tables.md"
+    "$out"/matrix.json "$out"/matrix-sponza.json "$out"/matrix-forest.json > "$out/tables.md"
