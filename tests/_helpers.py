@@ -46,3 +46,28 @@ def assert_same_hits(hits, ref, label=""):
     hit = ref.prim >= 0
     assert np.array_equal(hits.u[hit].view(np.uint32), ref.u[hit].view(np.uint32)), label
     assert np.array_equal(hits.v[hit].view(np.uint32), ref.v[hit].view(np.uint32)), label
+
+
+def grid_scene(rng, g=8, zero_area=0):
+    """A g x g grid of unit quads in z = 0 (shared edges and vertices), plus exact
+    duplicates of 24 faces and ``zero_area`` degenerate triangles on its vertices, faces
+    shuffled: rays through edges and vertices tie at equal t."""
+    ii, jj = np.meshgrid(np.arange(g + 1), np.arange(g + 1), indexing="ij")
+    V = np.column_stack([ii.ravel(), jj.ravel(), np.zeros(ii.size)]).astype(np.float32)
+    k = lambda i, j: i * (g + 1) + j  # noqa: E731
+    F = np.array([f for i in range(g) for j in range(g)
+                  for f in ([k(i, j), k(i + 1, j), k(i + 1, j + 1)],
+                            [k(i, j), k(i + 1, j + 1), k(i, j + 1)])], np.int32)
+    flat = np.arange(zero_area, dtype=np.int32)
+    F = np.vstack([F, F[rng.choice(len(F), 24, replace=False)],
+                   np.column_stack([flat, flat, flat + 1])])
+    return V, F[rng.permutation(len(F))]
+
+
+def grid_tie_rays(rng, n):
+    """``n`` rays down onto :func:`grid_scene`'s grid, each hitting a vertex, an edge
+    midpoint or a quad centre exactly (dyadic coordinates)."""
+    target = rng.integers(0, 17, size=(n, 2)) / 2.0       # vertices, edge midpoints, centres
+    d = np.column_stack([rng.choice([-2, -1, -0.5, 0.5, 1, 2], size=(n, 2)), np.full(n, -4.0)])
+    o = np.column_stack([target - d[:, :2] * 1.25, np.full(n, 5.0)])   # exact dyadic hits
+    return batch(o, d)

@@ -19,7 +19,7 @@ from raysort.bvh import BVH
 from raysort.rays import Hits, RayBatch, gather, scatter, scatter_occluded
 from raysort.reference import brute_force
 
-from _helpers import assert_same_hits, batch, concat, random_rays
+from _helpers import assert_same_hits, batch, concat, grid_scene, grid_tie_rays, random_rays
 
 def _is_exact(name):
     try:
@@ -102,19 +102,6 @@ def boxes_scene():
         Vs.append(lo + corners * (hi - lo))
         Fs.append(cube + 8 * k)
     return np.vstack(Vs).astype(F32), np.vstack(Fs).astype(np.int32)
-
-
-def grid_scene(rng, g=8):
-    """A g x g grid of unit quads in z = 0 (shared edges and vertices), faces shuffled, plus
-    exact duplicates of some faces: rays through edges and vertices tie at equal t."""
-    ii, jj = np.meshgrid(np.arange(g + 1), np.arange(g + 1), indexing="ij")
-    V = np.column_stack([ii.ravel(), jj.ravel(), np.zeros(ii.size)]).astype(F32)
-    k = lambda i, j: i * (g + 1) + j  # noqa: E731
-    F = np.array([f for i in range(g) for j in range(g)
-                  for f in ([k(i, j), k(i + 1, j), k(i + 1, j + 1)],
-                            [k(i, j), k(i + 1, j + 1), k(i, j + 1)])], np.int32)
-    F = np.vstack([F, F[rng.choice(len(F), 24, replace=False)]])
-    return V, F[rng.permutation(len(F))]
 
 
 def check_untouched(name, bvh, rays, order, offsets, any_hit):
@@ -355,10 +342,7 @@ def test_ties_lowest_index(name):
     rng = np.random.default_rng(3)
     V, F = grid_scene(rng)
     n = 3000
-    target = rng.integers(0, 17, size=(n, 2)) / 2.0       # vertices, edge midpoints, centres
-    d = np.column_stack([rng.choice([-2, -1, -0.5, 0.5, 1, 2], size=(n, 2)), np.full(n, -4.0)])
-    o = np.column_stack([target - d[:, :2] * 1.25, np.full(n, 5.0)])   # exact dyadic hits
-    rays = batch(o, d)
+    rays = grid_tie_rays(rng, n)
     ref = brute_force(V, F, rays)
     assert (ref.prim >= 0).all()
     for max_leaf in (1, 3, 8):

@@ -17,7 +17,7 @@ from raysort.bvh import BVH
 from raysort.rays import gather, scatter, scatter_occluded
 from raysort.reference import brute_force
 
-from _helpers import assert_same_hits, batch, random_rays
+from _helpers import assert_same_hits, batch, grid_scene, grid_tie_rays, random_rays
 
 F32 = np.float32
 
@@ -40,20 +40,6 @@ def soup(rng, m=600):
     return V.reshape(-1, 3).astype(F32), np.arange(3 * m, dtype=np.int32).reshape(m, 3)
 
 
-def tie_scene(rng, g=8):
-    """A grid of unit quads in z = 0 with some faces duplicated (equal t, two ids) and
-    zero-area triangles on its vertices; faces shuffled."""
-    ii, jj = np.meshgrid(np.arange(g + 1), np.arange(g + 1), indexing="ij")
-    V = np.column_stack([ii.ravel(), jj.ravel(), np.zeros(ii.size)]).astype(F32)
-    k = lambda i, j: i * (g + 1) + j  # noqa: E731
-    F = np.array([f for i in range(g) for j in range(g)
-                  for f in ([k(i, j), k(i + 1, j), k(i + 1, j + 1)],
-                            [k(i, j), k(i + 1, j + 1), k(i, j + 1)])], np.int32)
-    flat = np.column_stack([np.arange(20), np.arange(20), np.arange(20) + 1]).astype(np.int32)
-    F = np.vstack([F, F[rng.choice(len(F), 24, replace=False)], flat])
-    return V, F[rng.permutation(len(F))]
-
-
 @pytest.mark.parametrize("max_leaf, group_cost, merged", [(1, 1.0, 16), (8, 1.0, 16),
                                                           (8, 0.25, 64), (32, 4.0, 8)])
 def test_random_rays_match_brute_force_on_every_isa(each_isa, rng, max_leaf, group_cost,
@@ -72,12 +58,8 @@ def test_random_rays_match_brute_force_on_every_isa(each_isa, rng, max_leaf, gro
 
 
 def test_ties_and_zero_area_triangles_on_every_isa(each_isa, rng):
-    V, F = tie_scene(rng)
-    n = 3000
-    target = rng.integers(0, 17, size=(n, 2)) / 2.0       # vertices, edge midpoints, centres
-    d = np.column_stack([rng.choice([-2, -1, -0.5, 0.5, 1, 2], size=(n, 2)), np.full(n, -4.0)])
-    o = np.column_stack([target - d[:, :2] * 1.25, np.full(n, 5.0)])   # exact dyadic hits
-    rays = batch(o, d)
+    V, F = grid_scene(rng, zero_area=20)
+    rays = grid_tie_rays(rng, 3000)
     ref = brute_force(V, F, rays)
     assert (ref.prim >= 0).all()
     for max_leaf in (1, 8):
