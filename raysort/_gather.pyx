@@ -5,24 +5,52 @@ index order into a temporary 4-ray packet and written with 4-wide stores into
 16-byte aligned structure-of-arrays sub-packets, computing the inverse
 direction on the way (``rs_gather4`` in simd.h).
 """
-from libc.stdint cimport int32_t
+from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.math cimport INFINITY
-from raysort._types cimport (rs_gather4, rs_isa_name, rs_prefetch, RS_RAY_ROWS,
-                             RS_PACKET_ROWS, RS_PACKET_T)
+from libc.stdlib cimport calloc, free
+from libc.string cimport memcpy
+from raysort._checks cimport any_hit_bad, closest_bad, offsets_bad, sub_packet_bad
+from raysort._types cimport (rs_gather4, rs_isa_name, rs_prefetch, RS_MAX_PACKET,
+                             RS_RAY_ROWS, RS_PACKET_ROWS, RS_PACKET_TMIN, RS_PACKET_T)
 
 cdef enum:
     PREFETCH_AHEAD = 16     # rays (in the sorter's order) between a prefetch and its use
 
 
+def offsets_valid(const int32_t[::1] offsets, int32_t n):
+    """A sorter's ``offsets`` run from 0 to ``n`` in sub-packets of 1..RS_MAX_PACKET rays
+    (what :func:`gather` needs before the packets are allocated)."""
+    cdef int bad
+    if offsets.shape[0] < 1:
+        return False
+    with nogil:
+        bad = offsets_bad(&offsets[0], offsets.shape[0] - 1, n, RS_MAX_PACKET)
+    return not bad
+
+
 def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1] offsets,
            const int32_t[::1] starts, float[:, ::1] dst, int32_t[::1] prim, float[::1] u,
-           float[::1] v, int32_t[::1] index):
-    cdef int n_packets = starts.shape[0], k, j, lane, count, base, s, ahead
-    cdef int n_rays = offsets[n_packets] if n_packets else 0
+           float[::1] v, int32_t[::1] index, const int32_t[::1] packets, float[::1] t0=None):
+    """Gather ``order[offsets[k]:offsets[k + 1]]`` into sub-packet k, checking the sorter's
+    order on the way: each sub-packet must hold rays of ``[0, n)`` from one large packet
+    (``packets``: valid boundaries ending at n), none twice.  ``offsets`` must be valid
+    (:func:`offsets_valid`), ``len(order) == n``, and ``starts``/``dst``/... sized for
+    them.  With ``t0``, the row ``t`` as gathered (each ray's tmax) is copied there.
+
+    Returns ``(order_ok, bad_ray)``: ``order_ok`` is False at the first sub-packet that
+    breaks the order contract (the gather stops there); ``bad_ray`` is a ray that breaks
+    the ray contract (active, yet tmin < 0 or not finite; stored inactive), or -1.
+    """
+    cdef Py_ssize_t n_packets = starts.shape[0], k, k_big = 0, j, count, base, s, ahead
+    cdef int32_t n = order.shape[0]
     cdef const float *src_rows[RS_RAY_ROWS]
     cdef float *dst_rows[RS_PACKET_ROWS]
     cdef int32_t idx[4]
-    cdef int c
+    cdef int c, lane, bad_lanes, order_bad = 0
+    cdef int32_t bad_ray = -1
+    cdef uint8_t *seen = <uint8_t *> calloc(n + 1, 1)
+    if seen == NULL:
+        raise MemoryError()
     for c in range(RS_RAY_ROWS):
         src_rows[c] = &src[c, 0]
     for c in range(RS_PACKET_ROWS):
@@ -31,39 +59,61 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
         for k in range(n_packets):
             base = offsets[k]
             count = offsets[k + 1] - base
+            if sub_packet_bad(&order[0], base, base + count, &packets[0],
+                              packets.shape[0] - 1, n, &k_big, seen):
+                order_bad = 1
+                break
             for j in range(0, count, 4):
-                # the rows of rays further on, which the order makes random accesses
+                # the rows of rays further on, which the order makes random accesses (a
+                # prefetch of a ray not checked yet reads nothing)
                 for lane in range(4):
                     ahead = base + j + lane + PREFETCH_AHEAD
-                    if ahead < n_rays:
+                    if ahead < n and <uint32_t> order[ahead] < <uint32_t> n:
                         for c in range(RS_RAY_ROWS):
-                            rs_prefetch(&src[c, order[ahead]])
+                            rs_prefetch(src_rows[c] + order[ahead])
                 for lane in range(4):
                     idx[lane] = order[base + j + lane] if j + lane < count else -1
                 s = starts[k] + j
-                rs_gather4(dst_rows, &prim[0], &u[0], &v[0], s, src_rows, idx)
+                bad_lanes = rs_gather4(dst_rows, &prim[0], &u[0], &v[0], s, src_rows, idx)
+                if bad_lanes and bad_ray < 0:
+                    for lane in range(3, -1, -1):
+                        if bad_lanes & (1 << lane):
+                            bad_ray = idx[lane]
                 for lane in range(4):
                     index[s + lane] = idx[lane]
-        # lanes after the last sub-packet (an empty batch still has 4 lanes)
-        s = starts[n_packets - 1] + ((offsets[n_packets] - offsets[n_packets - 1] + 3) & ~3) \
-            if n_packets else 0
-        for j in range(s, dst.shape[1], 4):
-            for lane in range(4):
-                idx[lane] = -1
-            rs_gather4(dst_rows, &prim[0], &u[0], &v[0], j, src_rows, idx)
-            for lane in range(4):
-                index[j + lane] = -1
+        if not order_bad:
+            # lanes after the last sub-packet (an empty batch still has 4 lanes)
+            s = starts[n_packets - 1] + ((offsets[n_packets] - offsets[n_packets - 1] + 3) & ~3) \
+                if n_packets else 0
+            for j in range(s, dst.shape[1], 4):
+                for lane in range(4):
+                    idx[lane] = -1
+                rs_gather4(dst_rows, &prim[0], &u[0], &v[0], j, src_rows, idx)
+                for lane in range(4):
+                    index[j + lane] = -1
+            if t0 is not None:
+                memcpy(&t0[0], &dst[RS_PACKET_T, 0], dst.shape[1] * sizeof(float))
+    free(seen)
+    return not order_bad, bad_ray
 
 
 def scatter(const float[:, ::1] rows, const int32_t[::1] prim, const float[::1] u,
             const float[::1] v, const int32_t[::1] index, float[::1] t_out,
             int32_t[::1] prim_out, float[::1] u_out, float[::1] v_out):
-    cdef int s, i
+    """Every lane's hit to its ray ``index[lane]`` (-1: none); False, with nothing more
+    written, at a lane whose index is beyond the outputs."""
+    cdef Py_ssize_t s
+    cdef int32_t i
+    cdef uint32_t n = t_out.shape[0]
+    cdef bint ok = True
     with nogil:
         for s in range(index.shape[0]):
             i = index[s]
             if i < 0:
                 continue
+            if <uint32_t> i >= n:
+                ok = False
+                break
             if prim[s] >= 0:
                 t_out[i] = rows[RS_PACKET_T, s]
                 prim_out[i] = prim[s]
@@ -74,14 +124,79 @@ def scatter(const float[:, ::1] rows, const int32_t[::1] prim, const float[::1] 
                 prim_out[i] = -1
                 u_out[i] = 0
                 v_out[i] = 0
+    return ok
 
 
 def scatter_occluded(const int32_t[::1] prim, const int32_t[::1] index, unsigned char[::1] out):
-    cdef int s
+    """``out[index[lane]]``: the lane found a hit; False at an index beyond ``out``."""
+    cdef Py_ssize_t s
+    cdef uint32_t n = out.shape[0]
+    cdef bint ok = True
     with nogil:
         for s in range(index.shape[0]):
             if index[s] >= 0:
+                if <uint32_t> index[s] >= n:
+                    ok = False
+                    break
                 out[index[s]] = prim[s] >= 0
+    return ok
+
+
+cdef inline int padding_bad(const int32_t *prim, const int32_t *index, Py_ssize_t a,
+                            Py_ssize_t b) noexcept nogil:
+    """Lanes [a, b) hold no ray and must stay so (index and prim -1)."""
+    cdef Py_ssize_t lane
+    cdef int bad = 0
+    for lane in range(a, b):
+        bad |= (index[lane] != -1) | (prim[lane] != -1)
+    return bad
+
+
+def scatter_checked(const float[:, ::1] rows, const int32_t[::1] prim, const float[::1] u,
+                    const float[::1] v, const int32_t[::1] index, const int32_t[::1] starts,
+                    const int32_t[::1] counts, const int32_t[::1] order,
+                    const int32_t[::1] offsets, const float[::1] t0, int64_t n_prim,
+                    bint any_hit, float[::1] t_out, int32_t[::1] prim_out, float[::1] u_out,
+                    float[::1] v_out, uint8_t[::1] occluded):
+    """The scatter of :func:`gather`'s packets after a traversal, checking its hits on the
+    way (the rules of :func:`raysort._contract.hits`): each lane of sub-packet k still
+    holds ``order[offsets[k] + j]``, padding lanes stay empty, prim is -1 or below
+    ``n_prim``, and a closest hit lies in ``(tmin, t0)`` with finite u, v.  Rays are
+    written by ``order`` (checked by the gather), so nothing is written out of range.
+    Closest hits go to ``t_out``, ``prim_out``, ``u_out``, ``v_out``, any hits to
+    ``occluded``; returns False at the first sub-packet that breaks the contract."""
+    cdef Py_ssize_t n_sub = starts.shape[0], k, j, s, c, end = 0, lane
+    cdef const int32_t *rays
+    cdef int32_t i, p
+    cdef uint32_t n_prim32 = <uint32_t> n_prim
+    cdef int bad = 0, hit
+    cdef const float *tmin = &rows[RS_PACKET_TMIN, 0]
+    cdef const float *t = &rows[RS_PACKET_T, 0]
+    with nogil:
+        for k in range(n_sub + 1):
+            s = starts[k] if k < n_sub else index.shape[0]
+            c = counts[k] if k < n_sub else 0
+            bad |= padding_bad(&prim[0], &index[0], end, s)
+            rays = &order[offsets[k]] if c else NULL
+            if any_hit:
+                for j in range(c):
+                    lane, i, p = s + j, rays[j], prim[s + j]
+                    bad |= (index[lane] != i) | any_hit_bad(p, n_prim32)
+                    occluded[i] = p >= 0
+            else:
+                for j in range(c):
+                    lane, i, p = s + j, rays[j], prim[s + j]
+                    bad |= (index[lane] != i) | closest_bad(p, tmin[lane], t[lane], t0[lane],
+                                                            u[lane], v[lane], n_prim32)
+                    hit = p >= 0
+                    t_out[i] = t[lane] if hit else INFINITY
+                    prim_out[i] = p if hit else -1
+                    u_out[i] = u[lane] if hit else 0
+                    v_out[i] = v[lane] if hit else 0
+            if bad:
+                break
+            end = s + c
+    return not bad
 
 
 def add_unoccluded(double[:, ::1] radiance, const int32_t[::1] slot,

@@ -29,8 +29,9 @@ from raysort.rays import (MAX_PACKET, MAX_RAYS, PACKET_ROWS, RAY_ROWS, PacketRow
                           RayRow)
 from raysort.stats import Counters
 
-__all__ = ["check_packets", "check_ray_batch", "check_sort", "check_hits", "check_counters",
-           "check_generated", "check_bounce", "call_plugin", "before_traversal", "plugin_error"]
+__all__ = ["check_packets", "check_ray_batch", "sort_arrays", "check_sort", "check_hits",
+           "check_packet_arrays", "packet_arrays", "check_rays", "check_counters", "check_generated",
+           "check_bounce", "call_plugin", "before_traversal", "plugin_error"]
 
 _BAD = _contract.Bad
 _TMIN, _ORIGIN, _DIRECTION = RayRow.tmin, RayRow.ox, RayRow.dx     # three rows each
@@ -195,14 +196,10 @@ def _failer(kind, plugin):
     return fail
 
 
-def check_sort(plugin, result, n, packets):
-    """Validate a sorter's ``(order, offsets)`` for ``n`` rays; returns them as int32 arrays.
-
-    ``plugin`` is the sorter or its name.  ``order`` must be a permutation of
-    ``range(n)``; ``offsets`` must start at 0, increase strictly and end at
-    ``n``; each sub-packet holds at most 4096 rays, all from one large packet
-    (``packets``: valid boundaries, see :func:`check_packets`).
-    """
+def sort_arrays(plugin, result, n):
+    """A sorter's ``(order, offsets)`` for ``n`` rays as contiguous int32 arrays, checking
+    what is not a matter of their values (the tuple, integer types, ``len(order) == n``,
+    an offset at all, every value within int32); :func:`check_sort` checks the rest."""
     fail = _failer("sorters", plugin)
     if not (isinstance(result, tuple) and len(result) == 2):
         fail(f"sort() must return (order, offsets), got {type(result).__name__}")
@@ -212,8 +209,33 @@ def check_sort(plugin, result, n, packets):
         fail(f"order has {len(order)} entries for {n} rays")
     if len(offsets) < 1:
         fail(f"offsets must run from 0 to {n}, got an empty array")
-    if order.dtype != offsets.dtype:
-        order, offsets = order.astype(np.int64), offsets.astype(np.int64)
+    if order.dtype != np.int32:
+        code, where = _contract.index_array(order, 0, n, False)
+        if code:
+            fail(f"order is not a permutation of the batch: order[{where}] = {order[where]} "
+                 f"is out of range 0..{n - 1}")
+        order = order.astype(np.int32)
+    if offsets.dtype != np.int32:
+        code, where = _contract.index_array(offsets, 0, n + 1, False)
+        if code:
+            fail(f"offsets must run from 0 to {n}, got {offsets[0]}..{offsets[-1]} with "
+                 f"{offsets[where]} at position {where}")
+        offsets = offsets.astype(np.int32)
+    return order, offsets
+
+
+def check_sort(plugin, result, n, packets):
+    """Validate a sorter's ``(order, offsets)`` for ``n`` rays; returns them as int32 arrays.
+
+    ``plugin`` is the sorter or its name.  ``order`` must be a permutation of
+    ``range(n)``; ``offsets`` must start at 0, increase strictly and end at
+    ``n``; each sub-packet holds at most 4096 rays, all from one large packet
+    (``packets``: valid boundaries, see :func:`check_packets`).  (The pipeline
+    runs these checks inside its gather, :func:`raysort.rays.gather_checked`,
+    and this function only to say what is wrong.)
+    """
+    fail = _failer("sorters", plugin)
+    order, offsets = sort_arrays(plugin, result, n)
     packets = np.ascontiguousarray(packets, dtype=np.int32)
     code, where = _contract.sort_result(order, offsets, packets, n, MAX_PACKET)
     if code in (_BAD.BAD_OFFSETS_START, _BAD.BAD_OFFSETS_END, _BAD.BAD_OFFSETS_RANGE):
@@ -234,14 +256,18 @@ def check_sort(plugin, result, n, packets):
              f"(again at order[{where}])")
     if code == _BAD.BAD_MIXED:
         fail(f"sub-packet {where} mixes rays of different large packets")
-    return order.astype(np.int32, copy=False), offsets.astype(np.int32, copy=False)
+    return order, offsets
 
 
 def before_traversal(packets):
     """What :func:`check_hits` compares with: take it after the gather, before the
     traversal runs (the arrays, and a copy of the row ``t``, which holds each ray's tmax)."""
-    return (tuple(getattr(packets, name) for name in _PACKET_ARRAYS),
-            packets.rows[_LANE_T].copy())
+    return packet_arrays(packets), packets.rows[_LANE_T].copy()
+
+
+def packet_arrays(packets):
+    """The arrays of ``packets`` that :func:`check_packet_arrays` compares with."""
+    return tuple(getattr(packets, name) for name in _PACKET_ARRAYS)
 
 
 def check_hits(plugin, packets, before, order, offsets, n_prim, any_hit):
@@ -255,11 +281,7 @@ def check_hits(plugin, packets, before, order, offsets, n_prim, any_hit):
     """
     fail = _failer("traversals", plugin)
     arrays, t0 = before
-    for name, array in zip(_PACKET_ARRAYS, arrays):
-        if getattr(packets, name, None) is not array:
-            fail(f"intersect() replaced packets.{name}; write into the arrays instead")
-    if any(a.shape != s or a.dtype != d for a, (s, d) in zip(arrays, _packet_shapes(packets))):
-        fail("intersect() reshaped or retyped an array of the packets")
+    check_packet_arrays(plugin, packets, arrays)
     rows, prim, u, v, index, starts, counts = arrays
     code, lane = _contract.hits(rows, t0, prim, u, v, index, starts, counts, order, offsets,
                                 n_prim, any_hit)
@@ -275,6 +297,17 @@ def check_hits(plugin, packets, before, order, offsets, n_prim, any_hit):
              f"the ray's interval ({rows[_LANE_TMIN, lane]}, {t0[lane]})")
     if code == _BAD.BAD_UV:
         fail(f"lane {lane}: a hit with u = {u[lane]}, v = {v[lane]} (must be finite)")
+
+
+def check_packet_arrays(plugin, packets, arrays):
+    """A traversal left ``packets`` holding the ``arrays`` it was given
+    (:func:`packet_arrays`), unchanged in shape and type."""
+    fail = _failer("traversals", plugin)
+    for name, array in zip(_PACKET_ARRAYS, arrays):
+        if getattr(packets, name, None) is not array:
+            fail(f"intersect() replaced packets.{name}; write into the arrays instead")
+    if any(a.shape != s or a.dtype != d for a, (s, d) in zip(arrays, _packet_shapes(packets))):
+        fail("intersect() reshaped or retyped an array of the packets")
 
 
 def _packet_shapes(packets):
@@ -302,18 +335,28 @@ def check_counters(plugin, counters):
     return counters
 
 
-def check_generated(plugin, rays, n):
+def check_generated(plugin, rays, n, *, with_rays=True):
     """A generator's result: a :class:`RayBatch` of ``n`` rays, each finite or
-    marked invalid."""
+    marked invalid (``with_rays=False`` leaves that to the caller, as for
+    :func:`check_bounce`)."""
     fail = _failer("generators", plugin)
     _batch_layout(rays, "generate() result", fail)
     if len(rays) != n:
         fail(f"generate() must return {n} rays (pixels x samples), got {len(rays)}")
-    _rays(rays, "generate() result", fail)
+    if with_rays:
+        _rays(rays, "generate() result", fail)
     return rays
 
 
-def check_bounce(plugin, bounce, n, slots, radiance):
+def check_rays(kind, plugin, rays, label):
+    """Rays a plugin of ``kind`` made (``label`` says which): each finite or marked invalid
+    (``not tmin < tmax``), with ``tmin >= 0``.  :func:`check_generated` and
+    :func:`check_bounce` include it; the pipeline runs it inside its gather and this
+    function only to say what is wrong."""
+    _rays(rays, label, _failer(kind, plugin))
+
+
+def check_bounce(plugin, bounce, n, slots, radiance, *, with_rays=True):
     """A shader's :class:`Bounce` for ``n`` shaded rays whose paths add to
     ``radiance`` rows ``0..slots-1``; returns it with arrays of the pipeline's types.
 
@@ -327,7 +370,7 @@ def check_bounce(plugin, bounce, n, slots, radiance):
     if not isinstance(bounce, Bounce):
         fail(f"shade() must return raysort.paths.Bounce, got {type(bounce).__name__}")
     parent, _, throughput = _paths(bounce.rays, bounce.parent, None, bounce.throughput, n,
-                                   slots, "Bounce", "throughput", fail)
+                                   slots, "Bounce", "throughput", fail, with_rays)
     shadow = bounce.shadow
     if shadow is not None:
         if not isinstance(shadow, ShadowRays):
@@ -335,11 +378,11 @@ def check_bounce(plugin, bounce, n, slots, radiance):
                  f"{type(shadow).__name__}")
         shadow = ShadowRays(shadow.rays, *_paths(shadow.rays, shadow.parent, shadow.slot,
                                                  shadow.contribution, n, slots, "ShadowRays",
-                                                 "contribution", fail))
+                                                 "contribution", fail, with_rays))
     return Bounce(bounce.rays, parent, throughput, shadow)
 
 
-def _paths(rays, parent, slot, weight, n, slots, label, weight_name, fail):
+def _paths(rays, parent, slot, weight, n, slots, label, weight_name, fail, with_rays):
     """Rays continuing paths, their parents (ascending in 0..n-1), slots (0..slots-1 or
     None) and (3, m) weights, in one pass; returns (parent, slot, weight) as int32 and
     float32 arrays."""
@@ -348,7 +391,7 @@ def _paths(rays, parent, slot, weight, n, slots, label, weight_name, fail):
     parent = _int32(parent, f"{label}.parent", m, fail)
     slot = None if slot is None else _int32(slot, f"{label}.slot", m, fail)
     weight = _weights(weight, f"{label}.{weight_name}", m, fail)
-    code, i = _contract.paths(rays.data, m, parent, weight, slot, n, slots)
+    code, i = _contract.paths(rays.data, m, parent, weight, slot, n, slots, with_rays)
     if code in (_BAD.BAD_TMIN, _BAD.BAD_RAY):
         _rays(rays, f"{label}.rays", fail)
     if code == _BAD.BAD_PARENT_RANGE:

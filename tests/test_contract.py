@@ -16,6 +16,7 @@ from raysort.contract import check_sort
 from raysort.errors import PluginContractError, RaysortError
 from raysort.rays import MAX_PACKET, RayBatch
 from raysort.sorters.none import NoneSorter
+from raysort.stats import Counters
 
 NAME = "my_sorter"
 N = 10
@@ -225,7 +226,10 @@ def test_third_party_subclass_of_trusted_builtin_is_checked(registered):
         pipe.render(8, 8, 1)
 
 
-CHECKS = {"sorters": "check_sort", "traversals": "check_hits", "shaders": "check_bounce",
+# The checks the pipeline runs in Python on a plugin's result, which trusted built-ins
+# skip with check_plugins=False.  A sorter's order and a traversal's hits are checked
+# inside the gather and the scatter, always (see test_fused_checks_catch_trusted_plugins).
+CHECKS = {"traversals": "check_packet_arrays", "shaders": "check_bounce",
           "generators": "check_generated"}
 
 
@@ -233,42 +237,62 @@ CHECKS = {"sorters": "check_sort", "traversals": "check_hits", "shaders": "check
 def check_calls(monkeypatch):
     """Record (check, plugin name) for each plugin check the pipeline runs."""
     calls = []
-    for check in CHECKS.values():
+    for check in (*CHECKS.values(), "sort_arrays", "check_sort", "check_hits"):
         real = getattr(contract, check)
 
-        def spy(plugin, *args, _real=real, _check=check):
+        def spy(plugin, *args, _real=real, _check=check, **kwargs):
             calls.append((_check, plugin if isinstance(plugin, str) else plugin.name))
-            return _real(plugin, *args)
+            return _real(plugin, *args, **kwargs)
 
         monkeypatch.setattr(contract, check, spy)
     return calls
 
 
-@pytest.mark.parametrize("sorter, check_plugins, checked", [
-    ("none", True, True), ("nah", True, True), ("nah_numpy", True, True),
-    ("none", False, False), ("nah", False, False),     # trusted built-ins may skip
-    ("nah_numpy", False, True),                         # built-in but untrusted
-])
-def test_which_sorters_are_checked(check_calls, sorter, check_plugins, checked):
-    """check_plugins=False skips the check only for built-ins marked trusted."""
-    assert raysort.load("sorters", sorter).trusted == (sorter in ("none", "nah"))
-    raysort.Pipeline("plane", sorter=sorter, check_plugins=check_plugins).render(8, 8, 1)
-    sorts = [name for check, name in check_calls if check == "check_sort"]
-    assert bool(sorts) == checked
-    assert set(sorts) <= {sorter}
-
-
 @pytest.mark.parametrize("check_plugins", [True, False])
 def test_every_kind_is_checked_unless_trusted(check_calls, check_plugins):
     """With check_plugins=True every plugin result is checked; with False none of the
-    trusted built-ins (pinhole, nah, wide, lambert) is."""
+    trusted built-ins (pinhole, wide8, lambert) is, but for the sorter's order and the
+    traversal's hits, checked inside the gather and the scatter; check_sort and
+    check_hits run only to name a fault."""
     pipe = raysort.Pipeline("plane", check_plugins=check_plugins)
     for kind in CHECKS:
         plugin = getattr(pipe, kind[:-1])
         assert vars(type(plugin)).get("trusted") is True, plugin
     pipe.render(8, 8, 1)
     expected = {(CHECKS[kind], getattr(pipe, kind[:-1]).name) for kind in CHECKS}
-    assert set(check_calls) == (expected if check_plugins else set())
+    assert set(check_calls) == ((expected if check_plugins else set())
+                                | {("sort_arrays", pipe.sorter.name)})
+
+
+def _write_prim(value):
+    def intersect(self, bvh, packets, any_hit=False):
+        packets.prim[packets.starts[0]] = value
+        return Counters()
+    return intersect
+
+
+def _repeat_first_ray(self, rays, packets, bounds):
+    order = np.arange(len(rays), dtype=np.int32)
+    order[1:2] = 0
+    return order, np.array([0, len(rays)], np.int32)
+
+
+@pytest.mark.parametrize("kind, method, broken, match", [
+    ("sorters", "sort", _repeat_first_ray, "permutation"),
+    ("traversals", "intersect", _write_prim(50_000_000), "prim = 50000000"),
+    ("traversals", "intersect", _write_prim(-7), "prim = -7"),
+])
+@pytest.mark.parametrize("check_plugins", [True, False])
+def test_fused_checks_catch_trusted_plugins(monkeypatch, kind, method, broken, match,
+                                            check_plugins):
+    """A trusted built-in sorter or traversal gone wrong is caught with check_plugins=False
+    too (the checks run inside the gather and the scatter), and named."""
+    pipe = raysort.Pipeline("plane", check_plugins=check_plugins)
+    plugin = getattr(pipe, kind[:-1])
+    monkeypatch.setattr(type(plugin), method, broken)
+    with pytest.raises(PluginContractError, match=match) as info:
+        pipe.render(8, 8, 1)
+    assert (info.value.kind, info.value.name) == (kind, plugin.name)
 
 
 def test_untrusted_valid_sorter_is_checked_and_works(registered, check_calls):
@@ -277,8 +301,8 @@ def test_untrusted_valid_sorter_is_checked_and_works(registered, check_calls):
     registered("counting_test", CountingSorter)
     image = raysort.Pipeline("plane", sorter="counting_test",
                              check_plugins=False).render(8, 8, 1).image
-    assert ("check_sort", "counting_test") in check_calls
-    assert {name for check, name in check_calls if check == "check_sort"} == {"counting_test"}
+    assert ("sort_arrays", "counting_test") in check_calls
+    assert {name for check, name in check_calls if check == "sort_arrays"} == {"counting_test"}
     ref = raysort.Pipeline("plane", sorter="none").render(8, 8, 1).image
     assert image.tobytes() == ref.tobytes()
 
