@@ -18,7 +18,8 @@ from libc.string cimport memset
 from raysort._checks cimport (ray_bad, closest_bad, any_hit_bad, large_packet,
                               sub_packet_bad)
 from raysort._types cimport (RS_RAY_OX, RS_RAY_OY, RS_RAY_OZ, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ,
-                             RS_RAY_TMIN, RS_RAY_TMAX, RS_RAY_ROWS, RS_PACKET_TMIN, RS_PACKET_T)
+                             RS_RAY_TMIN, RS_RAY_TMAX, RS_RAY_ROWS, RS_PACKET_ROWS,
+                             RS_PACKET_TMIN, RS_PACKET_T)
 
 import numpy as np
 
@@ -57,6 +58,8 @@ cpdef enum Bad:
     BAD_PARENT_ORDER        # parent[i] < parent[i - 1]                 (path i)
     BAD_WEIGHT              # a throughput or contribution not finite   (path i)
     BAD_SLOT                # slot[i] outside [0, slots)                (path i)
+    BAD_LAYOUT              # packets.starts/counts changed             (sub-packet k)
+    BAD_SHAPE               # a packets array reshaped                  (0)
 
 
 cdef inline Py_ssize_t block_end(Py_ssize_t start, Py_ssize_t n) noexcept nogil:
@@ -174,15 +177,22 @@ cdef int index_lanes_kernel(const int32_t *prim, const int32_t *index, const int
                             const int32_t *counts, Py_ssize_t n_sub, const int32_t *order,
                             const int32_t *offsets, Py_ssize_t capacity,
                             Py_ssize_t *where) noexcept nogil:
-    """Each lane of sub-packet k holds ``order[offsets[k] + j]``; other lanes hold no ray
-    (index and prim -1)."""
-    cdef Py_ssize_t k, j, s, c, end = 0, lane
+    """Sub-packet k still starts and ends where the gather put it (from ``offsets``: its
+    rays padded to a multiple of 4 lanes), each of its lanes holds
+    ``order[offsets[k] + j]``; other lanes hold no ray (index and prim -1)."""
+    cdef Py_ssize_t k, j, s, c, end = 0, lane, next_start = 0
     cdef const int32_t *lanes
     cdef const int32_t *rays
     cdef int bad
     for k in range(n_sub + 1):
-        s = starts[k] if k < n_sub else capacity
-        c = counts[k] if k < n_sub else 0
+        if k < n_sub:
+            s, c = next_start, offsets[k + 1] - offsets[k]
+            next_start = s + ((c + 3) & ~3)
+            if starts[k] != s or counts[k] != c or next_start > capacity:
+                where[0] = k
+                return BAD_LAYOUT
+        else:
+            s, c = capacity, 0
         bad = 0
         for lane in range(end, s):
             bad |= (index[lane] != -1) | (prim[lane] != -1)
@@ -204,17 +214,25 @@ cdef int index_lanes_kernel(const int32_t *prim, const int32_t *index, const int
     return 0
 
 
-def hits(const float[:, ::1] rows, const float[::1] t0, const int32_t[::1] prim,
-         const float[::1] u, const float[::1] v, const int32_t[::1] index,
-         const int32_t[::1] starts, const int32_t[::1] counts, const int32_t[::1] order,
-         const int32_t[::1] offsets, int64_t n_prim, bint any_hit):
+def hits(const float[:, ::1] rows not None, const float[::1] t0 not None,
+         const int32_t[::1] prim not None, const float[::1] u not None,
+         const float[::1] v not None, const int32_t[::1] index not None,
+         const int32_t[::1] starts not None, const int32_t[::1] counts not None,
+         const int32_t[::1] order not None, const int32_t[::1] offsets not None,
+         int64_t n_prim, bint any_hit):
     """A traversal's hits in gathered packets, ``t0`` being the row ``t`` before it ran
     (the ray's tmax; -inf on an invalid ray).  Every lane still holds the ray the gather
     put there (``order[offsets[k]:offsets[k + 1]]`` in sub-packet k; other lanes index and
     prim -1), prim is -1 or a triangle index below ``n_prim``, and a closest hit has
     ``tmin < t < t0`` and finite u, v.  An any-hit query marks a hit by any valid prim."""
-    cdef Py_ssize_t where = 0, capacity = prim.shape[0]
+    cdef Py_ssize_t where = 0, capacity = rows.shape[1]
     cdef int code
+    if (rows.shape[0] != RS_PACKET_ROWS or prim.shape[0] != capacity
+            or u.shape[0] != capacity or v.shape[0] != capacity
+            or index.shape[0] != capacity or t0.shape[0] != capacity):
+        return BAD_SHAPE, 0
+    if starts.shape[0] != offsets.shape[0] - 1 or counts.shape[0] != starts.shape[0]:
+        return BAD_LAYOUT, 0
     with nogil:
         code = index_lanes_kernel(&prim[0], &index[0], &starts[0] if starts.shape[0] else NULL,
                                   &counts[0] if counts.shape[0] else NULL, starts.shape[0],
@@ -458,3 +476,67 @@ def paths(const float[:, ::1] data, Py_ssize_t m, const int32_t[::1] parent,
         code = paths_kernel(<const float *const *> r if with_rays else NULL, &parent[0], w,
                             slot_ptr, m, <uint32_t> n, <uint32_t> slots, &where)
     return code, where
+
+
+# ---------------------------------------------------------------------------
+# a shader's Bounce of exactly the pipeline's types, without leaving C
+# ---------------------------------------------------------------------------
+
+cdef bint paths_ok(object rays, object parent, object slot, object weight, int64_t n,
+                   int64_t slots, bint with_rays, type batch_type):
+    """:func:`paths` of a RayBatch and arrays already of the pipeline's types (int32,
+    float32 (3, m) with contiguous rows), all valid; False for anything else."""
+    cdef const float[:, ::1] data
+    cdef const int32_t[::1] p
+    cdef const int32_t[::1] s
+    cdef const float[:, :] w
+    cdef Py_ssize_t m, where = 0
+    cdef const float *r[RS_RAY_ROWS]
+    cdef const float *wr[3]
+    cdef int c, code
+    if type(rays) is not batch_type or type(rays.n) is not int:
+        return False
+    try:
+        data, p, w = rays.data, parent, weight
+        if slot is not None:
+            s = slot
+    except (TypeError, ValueError):
+        return False
+    m = rays.n
+    if (data.shape[0] != RS_RAY_ROWS or not 0 <= m <= data.shape[1] or p.shape[0] != m
+            or w.shape[0] != 3 or w.shape[1] != m or (m and w.strides[1] != sizeof(float))
+            or (slot is not None and s.shape[0] != m)):
+        return False
+    if m == 0:
+        return True
+    for c in range(RS_RAY_ROWS):
+        r[c] = &data[c, 0]
+    for c in range(3):
+        wr[c] = &w[c, 0]
+    with nogil:
+        code = paths_kernel(<const float *const *> r if with_rays else NULL, &p[0], wr,
+                            &s[0] if slot is not None else NULL, m, <uint32_t> n,
+                            <uint32_t> slots, &where)
+    return code == 0
+
+
+def bounce_ok(bounce, int64_t n, int64_t slots, const double[:, ::1] radiance not None,
+              bint with_rays, type bounce_type, type shadow_type, type batch_type):
+    """True when a shader's ``bounce`` is exactly of the pipeline's types (``bounce_type``,
+    ``shadow_type``, ``batch_type``, int32 and float32 arrays) and keeps its contract
+    (see :func:`raysort.contract.check_bounce`), and ``radiance`` is finite: the common
+    case, checked without running Python.  False means: let ``check_bounce`` say."""
+    cdef Py_ssize_t where = 0
+    cdef int code
+    if type(bounce) is not bounce_type:
+        return False
+    with nogil:
+        code = finite_kernel(&radiance[0, 0], radiance.shape[0] * radiance.shape[1], &where) \
+            if radiance.shape[0] * radiance.shape[1] else 0
+    if code or not paths_ok(bounce.rays, bounce.parent, None, bounce.throughput, n, slots,
+                            with_rays, batch_type):
+        return False
+    shadow = bounce.shadow
+    return shadow is None or (type(shadow) is shadow_type and paths_ok(
+        shadow.rays, shadow.parent, shadow.slot, shadow.contribution, n, slots, with_rays,
+        batch_type))

@@ -9,7 +9,7 @@ from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.math cimport INFINITY
 from libc.stdlib cimport calloc, free
 from libc.string cimport memcpy
-from raysort._checks cimport any_hit_bad, closest_bad, offsets_bad, sub_packet_bad
+from raysort._checks cimport offsets_bad, sub_packet_bad
 from raysort._types cimport (rs_gather4, rs_isa_name, rs_prefetch, RS_MAX_PACKET,
                              RS_RAY_ROWS, RS_PACKET_ROWS, RS_PACKET_TMIN, RS_PACKET_T)
 
@@ -30,10 +30,12 @@ def offsets_valid(const int32_t[::1] offsets, int32_t n):
 
 def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1] offsets,
            const int32_t[::1] starts, float[:, ::1] dst, int32_t[::1] prim, float[::1] u,
-           float[::1] v, int32_t[::1] index, const int32_t[::1] packets, float[::1] t0=None):
+           float[::1] v, int32_t[::1] index, const int32_t[::1] packets, float[::1] t0=None,
+           bint check_order=True):
     """Gather ``order[offsets[k]:offsets[k + 1]]`` into sub-packet k, checking the sorter's
-    order on the way: each sub-packet must hold rays of ``[0, n)`` from one large packet
-    (``packets``: valid boundaries ending at n), none twice.  ``offsets`` must be valid
+    order on the way (unless ``check_order`` is False, for a trusted sorter): each
+    sub-packet must hold rays of ``[0, n)`` from one large packet (``packets``: valid
+    boundaries ending at n), none twice.  ``offsets`` must be valid
     (:func:`offsets_valid`), ``len(order) == n``, and ``starts``/``dst``/... sized for
     them.  With ``t0``, the row ``t`` as gathered (each ray's tmax) is copied there.
 
@@ -48,8 +50,8 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
     cdef int32_t idx[4]
     cdef int c, lane, bad_lanes, order_bad = 0
     cdef int32_t bad_ray = -1
-    cdef uint8_t *seen = <uint8_t *> calloc(n + 1, 1)
-    if seen == NULL:
+    cdef uint8_t *seen = <uint8_t *> calloc(n + 1, 1) if check_order else NULL
+    if check_order and seen == NULL:
         raise MemoryError()
     for c in range(RS_RAY_ROWS):
         src_rows[c] = &src[c, 0]
@@ -59,8 +61,8 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
         for k in range(n_packets):
             base = offsets[k]
             count = offsets[k + 1] - base
-            if sub_packet_bad(&order[0], base, base + count, &packets[0],
-                              packets.shape[0] - 1, n, &k_big, seen):
+            if check_order and sub_packet_bad(&order[0], base, base + count, &packets[0],
+                                              packets.shape[0] - 1, n, &k_big, seen):
                 order_bad = 1
                 break
             for j in range(0, count, 4):
@@ -140,63 +142,6 @@ def scatter_occluded(const int32_t[::1] prim, const int32_t[::1] index, unsigned
                     break
                 out[index[s]] = prim[s] >= 0
     return ok
-
-
-cdef inline int padding_bad(const int32_t *prim, const int32_t *index, Py_ssize_t a,
-                            Py_ssize_t b) noexcept nogil:
-    """Lanes [a, b) hold no ray and must stay so (index and prim -1)."""
-    cdef Py_ssize_t lane
-    cdef int bad = 0
-    for lane in range(a, b):
-        bad |= (index[lane] != -1) | (prim[lane] != -1)
-    return bad
-
-
-def scatter_checked(const float[:, ::1] rows, const int32_t[::1] prim, const float[::1] u,
-                    const float[::1] v, const int32_t[::1] index, const int32_t[::1] starts,
-                    const int32_t[::1] counts, const int32_t[::1] order,
-                    const int32_t[::1] offsets, const float[::1] t0, int64_t n_prim,
-                    bint any_hit, float[::1] t_out, int32_t[::1] prim_out, float[::1] u_out,
-                    float[::1] v_out, uint8_t[::1] occluded):
-    """The scatter of :func:`gather`'s packets after a traversal, checking its hits on the
-    way (the rules of :func:`raysort._contract.hits`): each lane of sub-packet k still
-    holds ``order[offsets[k] + j]``, padding lanes stay empty, prim is -1 or below
-    ``n_prim``, and a closest hit lies in ``(tmin, t0)`` with finite u, v.  Rays are
-    written by ``order`` (checked by the gather), so nothing is written out of range.
-    Closest hits go to ``t_out``, ``prim_out``, ``u_out``, ``v_out``, any hits to
-    ``occluded``; returns False at the first sub-packet that breaks the contract."""
-    cdef Py_ssize_t n_sub = starts.shape[0], k, j, s, c, end = 0, lane
-    cdef const int32_t *rays
-    cdef int32_t i, p
-    cdef uint32_t n_prim32 = <uint32_t> n_prim
-    cdef int bad = 0, hit
-    cdef const float *tmin = &rows[RS_PACKET_TMIN, 0]
-    cdef const float *t = &rows[RS_PACKET_T, 0]
-    with nogil:
-        for k in range(n_sub + 1):
-            s = starts[k] if k < n_sub else index.shape[0]
-            c = counts[k] if k < n_sub else 0
-            bad |= padding_bad(&prim[0], &index[0], end, s)
-            rays = &order[offsets[k]] if c else NULL
-            if any_hit:
-                for j in range(c):
-                    lane, i, p = s + j, rays[j], prim[s + j]
-                    bad |= (index[lane] != i) | any_hit_bad(p, n_prim32)
-                    occluded[i] = p >= 0
-            else:
-                for j in range(c):
-                    lane, i, p = s + j, rays[j], prim[s + j]
-                    bad |= (index[lane] != i) | closest_bad(p, tmin[lane], t[lane], t0[lane],
-                                                            u[lane], v[lane], n_prim32)
-                    hit = p >= 0
-                    t_out[i] = t[lane] if hit else INFINITY
-                    prim_out[i] = p if hit else -1
-                    u_out[i] = u[lane] if hit else 0
-                    v_out[i] = v[lane] if hit else 0
-            if bad:
-                break
-            end = s + c
-    return not bad
 
 
 def add_unoccluded(double[:, ::1] radiance, const int32_t[::1] slot,

@@ -23,6 +23,7 @@ How a render is organised (and why it is deterministic):
 from __future__ import annotations
 
 import inspect
+import operator
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor, as_completed
@@ -36,7 +37,8 @@ from raysort.errors import ConfigError
 from raysort.params import boolean, integer
 from raysort.paths import Paths
 from raysort.progress import with_rays
-from raysort.rays import MAX_RAYS, Hits, RayBatch, add_unoccluded, gather_checked, scatter_checked
+from raysort.rays import (MAX_RAYS, Hits, RayBatch, add_unoccluded, gather_checked, scatter,
+                          scatter_checked, scatter_occluded)
 from raysort.scene import Scene, load_scene
 from raysort.stats import Counters
 
@@ -323,9 +325,9 @@ class Pipeline:
         names the plugin whose rays these are, which the ray contract then binds; a
         caller's rays may be anything (a ray that is not finite is invalid).
 
-        The sorter's result and the traversal's hits are checked inside the gather and
-        the scatter, which read them anyway (so always, at a cost of a few per cent of
-        those two stages); :mod:`raysort.contract` is called only to say what is wrong."""
+        The checks of the sorter's result, the rays and the traversal's hits run inside
+        the gather and the scatter, which read those arrays anyway;
+        :mod:`raysort.contract` is called only to say what is wrong."""
         n = len(rays)
         clock = _Clock(timings)
         if n == 0:
@@ -333,10 +335,13 @@ class Pipeline:
         result = contract.call_plugin("sorters", self.sorter, "sort", rays, packets.copy(),
                                       self.bvh.bounds.copy())
         clock.lap("sort")
-        order, offsets = contract.sort_arrays(self.sorter, result, n)
+        check_sort = self._checked(self.sorter)
+        order, offsets = contract.sort_arrays(self.sorter, result, n) if check_sort else result
         clock.lap("check")
+        check_hits = self._checked(self.traversal)
         batch, tmax, bad_ray = gather_checked(rays, order, offsets, packets,
-                                              keep_tmax=not any_hit)
+                                              keep_tmax=check_hits and not any_hit,
+                                              check_order=check_sort)
         clock.lap("gather")
         if batch is None:
             contract.check_sort(self.sorter, result, n, packets)
@@ -345,19 +350,21 @@ class Pipeline:
             kind, plugin, label = maker
             contract.check_rays(kind, plugin, rays, label)
             raise AssertionError(f"the gather rejected ray {bad_ray}, which check_rays passes")
-        arrays = contract.packet_arrays(batch) if self._checked(self.traversal) else None
-        clock.lap("check")
+        arrays = contract.packet_arrays(batch) if check_hits else None
         counters = self._intersect(batch, any_hit, threads, timings)
         clock.lap("traverse")
-        if arrays is not None:
-            contract.check_packet_arrays(self.traversal, batch, arrays)
-            clock.lap("check")
+        if not check_hits:
+            out = scatter_occluded(batch, n) if any_hit else scatter(batch, n)
+            clock.lap("scatter")
+            return out, counters
+        if not all(map(operator.is_, contract.packet_arrays(batch), arrays)):
+            contract.check_packet_arrays(self.traversal, batch, arrays)     # names it
+        clock.lap("check")
         out = scatter_checked(batch, order, offsets, tmax, len(self.bvh.faces), any_hit)
         clock.lap("scatter")
         if out is None:
-            before = (arrays or contract.packet_arrays(batch), batch.t if tmax is None else tmax)
-            contract.check_hits(self.traversal, batch, before, order, offsets,
-                                len(self.bvh.faces), any_hit)
+            contract.check_hits(self.traversal, batch, (arrays, batch.t if any_hit else tmax),
+                                order, offsets, len(self.bvh.faces), any_hit)
             raise AssertionError("the scatter rejected hits that check_hits passes")
         return out, counters
 

@@ -297,9 +297,10 @@ def gather(rays, order, offsets):
     return packets
 
 
-def gather_checked(rays, order, offsets, packets, keep_tmax=False):
+def gather_checked(rays, order, offsets, packets, keep_tmax=False, check_order=True):
     """:func:`gather` checking a sorter's result against the large packets ``packets``
-    and the rays against the ray contract on the way, for the pipeline.
+    (unless ``check_order`` is False: a trusted sorter's) and the rays against the ray
+    contract on the way, for the pipeline.
 
     ``order`` and ``offsets`` are int32 arrays with ``len(order) == len(rays)``;
     ``packets`` valid boundaries.  Returns ``(Packets, tmax, bad_ray)``:
@@ -316,7 +317,7 @@ def gather_checked(rays, order, offsets, packets, keep_tmax=False):
     tmax = np.empty(batch.capacity, np.float32) if keep_tmax else None
     order_ok, bad_ray = kernels.gather(rays.data, order, offsets, batch.starts, batch.rows,
                                        batch.prim, batch.u, batch.v, batch.index, packets,
-                                       tmax)
+                                       tmax, check_order)
     return (batch, tmax, bad_ray) if order_ok else (None, None, -1)
 
 
@@ -338,21 +339,24 @@ def scatter_occluded(packets, n):
 
 
 def scatter_checked(packets, order, offsets, tmax, n_prim, any_hit):
-    """Scatter the hits of :func:`gather_checked`'s ``packets`` after a traversal,
-    checking them on the way (the rules of :func:`raysort.contract.check_hits`,
-    except that the arrays are the ones gathered).  Returns the :class:`Hits`
-    (or, with ``any_hit``, the bool array of occluded rays), or None when the
-    traversal broke its contract.  ``tmax`` may be None for an any-hit query."""
-    n = len(order)
-    hits = None if any_hit else Hits(n)
-    occluded = np.zeros(n, dtype=np.uint8) if any_hit else None
-    ok = isa.module("_gather").scatter_checked(
-        packets.rows, packets.prim, packets.u, packets.v, packets.index, packets.starts,
-        packets.counts, order, offsets, tmax, n_prim, any_hit,
-        *((None,) * 4 if any_hit else (hits.t, hits.prim, hits.u, hits.v)), occluded)
-    if not ok:
+    """Check the hits a traversal wrote into :func:`gather_checked`'s ``packets`` (the
+    rules of :func:`raysort.contract.check_hits`, but for the arrays being the ones
+    gathered) and scatter them.  Returns the :class:`Hits` (or, with ``any_hit``, the
+    bool array of occluded rays), or None when the traversal broke its contract.
+    ``tmax`` may be None for an any-hit query.
+
+    The check is a separate pass before the scatter: over lanes, in order, it
+    vectorises, which the scatter's writes in ray order do not."""
+    try:
+        code, _ = isa.module("_contract").hits(
+            packets.rows, packets.t if tmax is None else tmax, packets.prim, packets.u,
+            packets.v, packets.index, packets.starts, packets.counts, order, offsets, n_prim,
+            any_hit)
+    except (TypeError, ValueError):         # an array retyped in place
         return None
-    return occluded.view(bool) if any_hit else hits
+    if code:
+        return None
+    return scatter_occluded(packets, len(order)) if any_hit else scatter(packets, len(order))
 
 
 def add_unoccluded(radiance, slot, contribution, occluded):

@@ -12,6 +12,7 @@ import pytest
 
 import raysort
 from raysort import contract
+from raysort import pipeline as pipeline_module
 from raysort.contract import check_sort
 from raysort.errors import PluginContractError, RaysortError
 from raysort.rays import MAX_PACKET, RayBatch
@@ -226,18 +227,20 @@ def test_third_party_subclass_of_trusted_builtin_is_checked(registered):
         pipe.render(8, 8, 1)
 
 
-# The checks the pipeline runs in Python on a plugin's result, which trusted built-ins
-# skip with check_plugins=False.  A sorter's order and a traversal's hits are checked
-# inside the gather and the scatter, always (see test_fused_checks_catch_trusted_plugins).
-CHECKS = {"traversals": "check_packet_arrays", "shaders": "check_bounce",
-          "generators": "check_generated"}
+# The check the pipeline runs on each plugin's result, which trusted built-ins skip with
+# check_plugins=False (the rest of a sorter's checks runs inside the gather, and a
+# traversal's in the scatter: test_fused_checks_catch_builtin_plugins).
+CHECKS = {"sorters": "sort_arrays", "traversals": "scatter_checked",
+          "shaders": "check_bounce", "generators": "check_generated"}
 
 
 @pytest.fixture
 def check_calls(monkeypatch):
-    """Record (check, plugin name) for each plugin check the pipeline runs."""
+    """Record (check, plugin name) for each plugin check the pipeline runs (the hits
+    check, which gets no plugin, as the pipeline's traversal)."""
     calls = []
-    for check in (*CHECKS.values(), "sort_arrays", "check_sort", "check_hits"):
+    for check in ("sort_arrays", "check_bounce", "check_generated", "check_sort",
+                  "check_hits"):
         real = getattr(contract, check)
 
         def spy(plugin, *args, _real=real, _check=check, **kwargs):
@@ -245,23 +248,43 @@ def check_calls(monkeypatch):
             return _real(plugin, *args, **kwargs)
 
         monkeypatch.setattr(contract, check, spy)
+    real_scatter = pipeline_module.scatter_checked
+
+    def scatter_spy(*args):
+        calls.append(("scatter_checked", "<the pipeline's traversal>"))
+        return real_scatter(*args)
+
+    monkeypatch.setattr(pipeline_module, "scatter_checked", scatter_spy)
     return calls
+
+
+@pytest.mark.parametrize("sorter, check_plugins, checked", [
+    ("none", True, True), ("nah", True, True), ("nah_numpy", True, True),
+    ("none", False, False), ("nah", False, False),     # trusted built-ins may skip
+    ("nah_numpy", False, True),                         # built-in but untrusted
+])
+def test_which_sorters_are_checked(check_calls, sorter, check_plugins, checked):
+    """check_plugins=False skips the check only for built-ins marked trusted."""
+    assert raysort.load("sorters", sorter).trusted == (sorter in ("none", "nah"))
+    raysort.Pipeline("plane", sorter=sorter, check_plugins=check_plugins).render(8, 8, 1)
+    sorts = [name for check, name in check_calls if check == "sort_arrays"]
+    assert bool(sorts) == checked
+    assert set(sorts) <= {sorter}
 
 
 @pytest.mark.parametrize("check_plugins", [True, False])
 def test_every_kind_is_checked_unless_trusted(check_calls, check_plugins):
     """With check_plugins=True every plugin result is checked; with False none of the
-    trusted built-ins (pinhole, wide8, lambert) is, but for the sorter's order and the
-    traversal's hits, checked inside the gather and the scatter; check_sort and
-    check_hits run only to name a fault."""
+    trusted built-ins (pinhole, nah, wide8, lambert) is; check_sort and check_hits run
+    only to name a fault."""
     pipe = raysort.Pipeline("plane", check_plugins=check_plugins)
     for kind in CHECKS:
         plugin = getattr(pipe, kind[:-1])
         assert vars(type(plugin)).get("trusted") is True, plugin
     pipe.render(8, 8, 1)
-    expected = {(CHECKS[kind], getattr(pipe, kind[:-1]).name) for kind in CHECKS}
-    assert set(check_calls) == ((expected if check_plugins else set())
-                                | {("sort_arrays", pipe.sorter.name)})
+    expected = {(CHECKS[kind], getattr(pipe, kind[:-1]).name) for kind in CHECKS
+                if kind != "traversals"} | {("scatter_checked", "<the pipeline's traversal>")}
+    assert set(check_calls) == (expected if check_plugins else set())
 
 
 def _write_prim(value):
@@ -269,6 +292,11 @@ def _write_prim(value):
         packets.prim[packets.starts[0]] = value
         return Counters()
     return intersect
+
+
+def _move_first_sub_packet(self, bvh, packets, any_hit=False):
+    packets.starts[0] = 1_000_000
+    return Counters()
 
 
 def _repeat_first_ray(self, rays, packets, bounds):
@@ -281,13 +309,12 @@ def _repeat_first_ray(self, rays, packets, bounds):
     ("sorters", "sort", _repeat_first_ray, "permutation"),
     ("traversals", "intersect", _write_prim(50_000_000), "prim = 50000000"),
     ("traversals", "intersect", _write_prim(-7), "prim = -7"),
+    ("traversals", "intersect", _move_first_sub_packet, "changed packets.starts"),
 ])
-@pytest.mark.parametrize("check_plugins", [True, False])
-def test_fused_checks_catch_trusted_plugins(monkeypatch, kind, method, broken, match,
-                                            check_plugins):
-    """A trusted built-in sorter or traversal gone wrong is caught with check_plugins=False
-    too (the checks run inside the gather and the scatter), and named."""
-    pipe = raysort.Pipeline("plane", check_plugins=check_plugins)
+def test_fused_checks_catch_builtin_plugins(monkeypatch, kind, method, broken, match):
+    """A built-in sorter or traversal gone wrong is caught by the checks inside the gather
+    and the scatter, and named."""
+    pipe = raysort.Pipeline("plane")
     plugin = getattr(pipe, kind[:-1])
     monkeypatch.setattr(type(plugin), method, broken)
     with pytest.raises(PluginContractError, match=match) as info:
@@ -303,6 +330,7 @@ def test_untrusted_valid_sorter_is_checked_and_works(registered, check_calls):
                              check_plugins=False).render(8, 8, 1).image
     assert ("sort_arrays", "counting_test") in check_calls
     assert {name for check, name in check_calls if check == "sort_arrays"} == {"counting_test"}
+    assert not {check for check, name in check_calls} & {"check_sort", "check_hits"}
     ref = raysort.Pipeline("plane", sorter="none").render(8, 8, 1).image
     assert image.tobytes() == ref.tobytes()
 
