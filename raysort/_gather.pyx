@@ -9,7 +9,7 @@ from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.math cimport INFINITY
 from libc.stdlib cimport calloc, free
 from libc.string cimport memcpy
-from raysort._checks cimport offsets_bad, sub_packet_bad
+from raysort._checks cimport checked_ray, offsets_bad, packet_bounds
 from raysort._types cimport (rs_gather4, rs_isa_name, rs_prefetch, RS_MAX_PACKET,
                              RS_RAY_ROWS, RS_PACKET_ROWS, RS_PACKET_TMIN, RS_PACKET_T)
 
@@ -49,7 +49,7 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
     cdef float *dst_rows[RS_PACKET_ROWS]
     cdef int32_t idx[4]
     cdef int c, lane, bad_lanes, order_bad = 0
-    cdef int32_t bad_ray = -1
+    cdef int32_t bad_ray = -1, lo = 0, hi = 0
     cdef uint8_t *seen = <uint8_t *> calloc(n + 1, 1) if check_order else NULL
     if check_order and seen == NULL:
         raise MemoryError()
@@ -61,8 +61,8 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
         for k in range(n_packets):
             base = offsets[k]
             count = offsets[k + 1] - base
-            if check_order and sub_packet_bad(&order[0], base, base + count, &packets[0],
-                                              packets.shape[0] - 1, n, &k_big, seen):
+            if check_order and packet_bounds(order[base], &packets[0], packets.shape[0] - 1, n,
+                                             &k_big, &lo, &hi):
                 order_bad = 1
                 break
             for j in range(0, count, 4):
@@ -73,8 +73,10 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
                     if ahead < n and <uint32_t> order[ahead] < <uint32_t> n:
                         for c in range(RS_RAY_ROWS):
                             rs_prefetch(src_rows[c] + order[ahead])
-                for lane in range(4):
-                    idx[lane] = order[base + j + lane] if j + lane < count else -1
+                for lane in range(4):   # a ray the order may not name reads nothing
+                    idx[lane] = -1 if j + lane >= count else (
+                        checked_ray(order[base + j + lane], lo, hi, n, seen, &order_bad)
+                        if check_order else order[base + j + lane])
                 s = starts[k] + j
                 bad_lanes = rs_gather4(dst_rows, &prim[0], &u[0], &v[0], s, src_rows, idx)
                 if bad_lanes and bad_ray < 0:
@@ -83,6 +85,8 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
                             bad_ray = idx[lane]
                 for lane in range(4):
                     index[s + lane] = idx[lane]
+            if order_bad:
+                break
         if not order_bad:
             # lanes after the last sub-packet (an empty batch still has 4 lanes)
             s = starts[n_packets - 1] + ((offsets[n_packets] - offsets[n_packets - 1] + 3) & ~3) \
