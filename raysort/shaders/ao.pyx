@@ -6,9 +6,10 @@ efficiency of ray traversal on GPUs", HPG 2009, and most ray-sorting work since)
 any-hit rays, cosine distributed around the surface normal, from every primary hit.
 """
 from libc.stdint cimport int32_t, uint32_t
-from raysort._rng cimport uniform
+from raysort._rng cimport seed_key, sample_key, uniform_at
 from raysort._types cimport RS_DIM_AO
-from raysort.shaders._shading cimport leave_surface, cosine_direction, store_ray
+from raysort.shaders._shading cimport (RayStage, STAGE_RAYS, leave_surface, cosine_direction,
+                                       stage_ray, write_staged)
 
 import numpy as np
 
@@ -35,8 +36,11 @@ cdef int ao_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::
                   double[:, ::1] radiance, float[:, ::1] ao_rays, int32_t[::1] ao_parent,
                   int32_t[::1] ao_slot, float[:, ::1] ao_weight) noexcept nogil:
     """Make ``samples`` AO rays per hit (misses add the background); returns how many."""
-    cdef int n = prim.shape[0], i, f, c, k, m = 0
+    cdef int n = prim.shape[0], i, f, c, k, j
+    cdef uint32_t seed_k = seed_key(seed), key
     cdef float nrm[3], o[3], w[3]
+    cdef RayStage stage
+    stage.count = stage.written = 0
     for i in range(n):
         f = prim[i]
         if f < 0:
@@ -44,16 +48,18 @@ cdef int ao_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::
                 radiance[slot[i], c] += thr[c, i] * background
             continue
         leave_surface(rays, t, normals, i, f, nrm, o)
+        key = sample_key(seed_k, pixel[i], sample[i])
         for k in range(samples):
-            cosine_direction(nrm, uniform(seed, pixel[i], sample[i], RS_DIM_AO + 2 * k),
-                             uniform(seed, pixel[i], sample[i], RS_DIM_AO + 2 * k + 1), w)
-            store_ray(ao_rays, m, o, w, distance)
+            cosine_direction(nrm, uniform_at(key, RS_DIM_AO + 2 * k),
+                             uniform_at(key, RS_DIM_AO + 2 * k + 1), w)
+            j = stage_ray(&stage, o, w, distance, i, slot[i])
             for c in range(3):
-                ao_weight[c, m] = thr[c, i] / samples
-            ao_parent[m] = i
-            ao_slot[m] = slot[i]
-            m += 1
-    return m
+                stage.weight[c][j] = thr[c, i] / samples
+            if stage.count == STAGE_RAYS:
+                write_staged(&stage, ao_rays, ao_weight, ao_parent, &ao_slot[0])
+    if stage.count:
+        write_staged(&stage, ao_rays, ao_weight, ao_parent, &ao_slot[0])
+    return stage.written
 
 
 def _ao(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,

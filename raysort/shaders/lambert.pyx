@@ -1,9 +1,10 @@
 """``lambert``: a Lambertian path tracer (cosine-weighted diffuse bounces)."""
-from libc.math cimport sqrt, M_PI, INFINITY
+from libc.math cimport sqrtf, M_PI, INFINITY
 from libc.stdint cimport int32_t, uint32_t
-from raysort._rng cimport uniform
+from raysort._rng cimport seed_key, sample_key, uniform_at
 from raysort._types cimport RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH, rs_prefetch
-from raysort.shaders._shading cimport leave_surface, cosine_direction, store_ray
+from raysort.shaders._shading cimport (RayStage, STAGE_RAYS, leave_surface, cosine_direction,
+                                       stage_ray, write_staged)
 
 import numpy as np
 
@@ -36,10 +37,16 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                       float[:, ::1] next_rays, int32_t[::1] next_parent, float[:, ::1] next_thr,
                       float[:, ::1] sh_rays, int32_t[::1] sh_parent, int32_t[::1] sh_slot,
                       float[:, ::1] sh_contrib, int *n_next, int *n_shadow) noexcept nogil:
-    cdef int n = prim.shape[0], i, f, a, c, k = 0, m = 0, L
+    cdef int n = prim.shape[0], i, f, a, c, j, L
     cdef uint32_t dim = RS_DIM_BOUNCE + RS_DIMS_PER_BOUNCE * prm.depth   # types.h's budget
-    cdef float nrm[3], o[3], w[3], u1, u2, q
-    cdef float cosl, dist2, dist, wl[3], best
+    cdef uint32_t seed_k = seed_key(prm.seed), key
+    cdef bint bounce = prm.depth < prm.max_depth
+    cdef bint roulette = bounce and prm.russian_roulette and prm.depth >= prm.rr_depth
+    cdef float nrm[3], o[3], w[3], q, best, reflect[3]
+    cdef float cosl, dist2, dist, inv_dist, wl[3], weight
+    cdef float inv_pi = <float>(1.0 / M_PI)
+    cdef RayStage nxt, sh
+    nxt.count = nxt.written = sh.count = sh.written = 0
     for i in range(n):
         if i + PREFETCH_AHEAD < n and prim[i + PREFETCH_AHEAD] >= 0:
             # the face data of a ray further on, which its hit makes a random access
@@ -56,51 +63,57 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
         if prm.emissive:
             for c in range(3):
                 radiance[slot[i], c] += thr[c, i] * emission[f, c]
+        for c in range(3):
+            reflect[c] = thr[c, i] * albedo[f, c]      # the path's weight after this bounce
         # facing geometric normal and the hit point, pushed off the surface
         leave_surface(rays, t, normals, i, f, nrm, o)
         # next-event estimation toward point lights (shadow rays)
         for L in range(light_pos.shape[0]):
             dist2 = 0.0
+            cosl = 0.0
             for a in range(3):
                 wl[a] = light_pos[L, a] - o[a]
                 dist2 = dist2 + wl[a] * wl[a]
-            dist = sqrt(dist2)
-            cosl = 0.0
-            for a in range(3):
-                wl[a] = wl[a] / dist
                 cosl = cosl + wl[a] * nrm[a]
-            if cosl <= 0 or dist2 == 0:
+            if not (cosl > 0 and dist2 > 0):     # behind the surface, or at the light
                 continue
-            store_ray(sh_rays, m, o, wl, dist)
+            dist = sqrtf(dist2)
+            inv_dist = <float>1.0 / dist
+            for a in range(3):
+                wl[a] = wl[a] * inv_dist
+            # BRDF (albedo / pi) * cos(light, normal) * intensity / distance^2
+            weight = cosl * inv_dist * inv_pi / dist2
+            j = stage_ray(&sh, o, wl, dist, i, slot[i])
             for c in range(3):
-                sh_contrib[c, m] = (thr[c, i] * albedo[f, c] * (1.0 / M_PI) * cosl
-                                    * light_int[L, c] / dist2)
-            sh_parent[m] = i
-            sh_slot[m] = slot[i]
-            m += 1
-        if prm.depth >= prm.max_depth:
+                sh.weight[c][j] = reflect[c] * light_int[L, c] * weight
+            if sh.count == STAGE_RAYS:
+                write_staged(&sh, sh_rays, sh_contrib, sh_parent, &sh_slot[0])
+        if not bounce:
             continue
-        # Russian roulette (off by default)
-        q = 1.0
-        if prm.russian_roulette and prm.depth >= prm.rr_depth:
-            best = thr[0, i] * albedo[f, 0]
+        key = sample_key(seed_k, pixel[i], sample[i])
+        if roulette:                                 # Russian roulette (off by default)
+            best = reflect[0]
             for c in range(1, 3):
-                if thr[c, i] * albedo[f, c] > best:
-                    best = thr[c, i] * albedo[f, c]
-            q = best if best < 0.95 else 0.95
-            if uniform(prm.seed, pixel[i], sample[i], dim + 2) >= q:
+                if reflect[c] > best:
+                    best = reflect[c]
+            q = best if best < <float>0.95 else <float>0.95
+            if uniform_at(key, dim + 2) >= q:
                 continue
+            for c in range(3):
+                reflect[c] = reflect[c] / q
         # cosine-weighted direction around the normal
-        u1 = uniform(prm.seed, pixel[i], sample[i], dim)
-        u2 = uniform(prm.seed, pixel[i], sample[i], dim + 1)
-        cosine_direction(nrm, u1, u2, w)
-        store_ray(next_rays, k, o, w, INFINITY)
+        cosine_direction(nrm, uniform_at(key, dim), uniform_at(key, dim + 1), w)
+        j = stage_ray(&nxt, o, w, INFINITY, i, 0)
         for c in range(3):
-            next_thr[c, k] = thr[c, i] * albedo[f, c] / q
-        next_parent[k] = i
-        k += 1
-    n_next[0] = k
-    n_shadow[0] = m
+            nxt.weight[c][j] = reflect[c]
+        if nxt.count == STAGE_RAYS:
+            write_staged(&nxt, next_rays, next_thr, next_parent, NULL)
+    if sh.count:
+        write_staged(&sh, sh_rays, sh_contrib, sh_parent, &sh_slot[0])
+    if nxt.count:
+        write_staged(&nxt, next_rays, next_thr, next_parent, NULL)
+    n_next[0] = nxt.written
+    n_shadow[0] = sh.written
 
 
 def _shade(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
