@@ -9,7 +9,7 @@ so the numbers of one path share a prefix: ``path_key(seed, pixel, sample)`` has
 it once and ``uniform_at(key, dim)`` draws each dimension with one more ``mix32``;
 ``uniform(seed, pixel, sample, dim)`` is the same number in one call.
 """
-from libc.stdint cimport uint32_t
+from libc.stdint cimport int32_t, uint32_t
 
 
 cdef inline uint32_t mix32(uint32_t x) noexcept nogil:
@@ -40,8 +40,9 @@ cdef inline float uniform_at(uint32_t key, uint32_t dim) noexcept nogil:
     """A float in [0, 1) for dimension ``dim`` of the path with this ``path_key``.
 
     24 bits times 2^-24 in float arithmetic is exact, so the value does not depend
-    on how the compiler evaluates it."""
-    return <float>(mix32(key ^ dim) >> 8) * <float>(1.0 / 16777216.0)
+    on how the compiler evaluates it (the bits go through a signed int, which SIMD
+    converts directly)."""
+    return <float><int32_t>(mix32(key ^ dim) >> 8) * <float>(1.0 / 16777216.0)
 
 
 cdef inline float uniform(uint32_t seed, uint32_t pixel, uint32_t sample,

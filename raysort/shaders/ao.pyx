@@ -8,8 +8,8 @@ any-hit rays, cosine distributed around the surface normal, from every primary h
 from libc.stdint cimport int32_t, uint32_t
 from raysort._rng cimport seed_key, sample_key, uniform_at
 from raysort._types cimport RS_DIM_AO
-from raysort.shaders._shading cimport (RayStage, STAGE_RAYS, leave_surface, cosine_direction,
-                                       stage_ray, write_staged)
+from raysort.shaders._shading cimport (LANES, HitBlock, add_hit, leave_surfaces,
+                                       cosine_directions, write_rays)
 
 import numpy as np
 
@@ -36,30 +36,45 @@ cdef int ao_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::
                   double[:, ::1] radiance, float[:, ::1] ao_rays, int32_t[::1] ao_parent,
                   int32_t[::1] ao_slot, float[:, ::1] ao_weight) noexcept nogil:
     """Make ``samples`` AO rays per hit (misses add the background); returns how many."""
-    cdef int n = prim.shape[0], i, f, c, k, j
-    cdef uint32_t seed_k = seed_key(seed), key
-    cdef float nrm[3], o[3], w[3]
-    cdef RayStage stage
-    stage.count = stage.written = 0
-    for i in range(n):
-        f = prim[i]
-        if f < 0:
-            for c in range(3):
-                radiance[slot[i], c] += thr[c, i] * background
+    cdef int n = prim.shape[0], blk, i0, i, f, c, h, k, m = 0
+    cdef uint32_t seed_k = seed_key(seed)
+    cdef HitBlock b
+    cdef uint32_t key[LANES]
+    cdef int32_t sel[LANES]
+    for h in range(LANES):
+        sel[h] = h
+    for blk in range((n + LANES - 1) // LANES):
+        i0 = blk * LANES
+        b.n = 0
+        for i in range(i0, min(i0 + LANES, n)):
+            f = prim[i]
+            if f < 0:
+                for c in range(3):
+                    radiance[slot[i], c] += thr[c, i] * background
+                continue
+            key[b.n] = sample_key(seed_k, pixel[i], sample[i])
+            add_hit(&b, rays, t, normals, i, f)
+        if b.n == 0:
             continue
-        leave_surface(rays, t, normals, i, f, nrm, o)
-        key = sample_key(seed_k, pixel[i], sample[i])
+        leave_surfaces(&b)
+        for h in range(b.n):
+            b.tmax[h] = distance
+        # the samples of a hit are consecutive rays (their parents ascend)
         for k in range(samples):
-            cosine_direction(nrm, uniform_at(key, RS_DIM_AO + 2 * k),
-                             uniform_at(key, RS_DIM_AO + 2 * k + 1), w)
-            j = stage_ray(&stage, o, w, distance, i, slot[i])
-            for c in range(3):
-                stage.weight[c][j] = thr[c, i] / samples
-            if stage.count == STAGE_RAYS:
-                write_staged(&stage, ao_rays, ao_weight, ao_parent, &ao_slot[0])
-    if stage.count:
-        write_staged(&stage, ao_rays, ao_weight, ao_parent, &ao_slot[0])
-    return stage.written
+            for h in range(b.n):
+                b.u1[h] = uniform_at(key[h], RS_DIM_AO + 2 * k)
+                b.u2[h] = uniform_at(key[h], RS_DIM_AO + 2 * k + 1)
+            cosine_directions(&b)
+            write_rays(&b, sel, b.n, ao_rays, m + k, samples)
+        for h in range(b.n):
+            i = b.ray[h]
+            for k in range(samples):
+                for c in range(3):
+                    ao_weight[c, m + k] = thr[c, i] / samples
+                ao_parent[m + k] = i
+                ao_slot[m + k] = slot[i]
+            m += samples
+    return m
 
 
 def _ao(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,

@@ -3,8 +3,8 @@ from libc.math cimport sqrtf, M_PI, INFINITY
 from libc.stdint cimport int32_t, uint32_t
 from raysort._rng cimport seed_key, sample_key, uniform_at
 from raysort._types cimport RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH, rs_prefetch
-from raysort.shaders._shading cimport (RayStage, STAGE_RAYS, leave_surface, cosine_direction,
-                                       stage_ray, write_staged)
+from raysort.shaders._shading cimport (LANES, HitBlock, add_hit, leave_surfaces,
+                                       cosine_directions, write_rays)
 
 import numpy as np
 
@@ -37,83 +37,118 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                       float[:, ::1] next_rays, int32_t[::1] next_parent, float[:, ::1] next_thr,
                       float[:, ::1] sh_rays, int32_t[::1] sh_parent, int32_t[::1] sh_slot,
                       float[:, ::1] sh_contrib, int *n_next, int *n_shadow) noexcept nogil:
-    cdef int n = prim.shape[0], i, f, a, c, j, L
+    cdef int n = prim.shape[0], blk, i0, i, f, a, c, h, j, L, count, k = 0, m = 0
     cdef uint32_t dim = RS_DIM_BOUNCE + RS_DIMS_PER_BOUNCE * prm.depth   # types.h's budget
-    cdef uint32_t seed_k = seed_key(prm.seed), key
+    cdef uint32_t seed_k = seed_key(prm.seed)
     cdef bint bounce = prm.depth < prm.max_depth
     cdef bint roulette = bounce and prm.russian_roulette and prm.depth >= prm.rr_depth
-    cdef float nrm[3], o[3], w[3], q, best, reflect[3]
-    cdef float cosl, dist2, dist, inv_dist, wl[3], weight
     cdef float inv_pi = <float>(1.0 / M_PI)
-    cdef RayStage nxt, sh
-    nxt.count = nxt.written = sh.count = sh.written = 0
-    for i in range(n):
-        if i + PREFETCH_AHEAD < n and prim[i + PREFETCH_AHEAD] >= 0:
-            # the face data of a ray further on, which its hit makes a random access
-            f = prim[i + PREFETCH_AHEAD]
-            rs_prefetch(&normals[f, 0])
-            rs_prefetch(&albedo[f, 0])
-            if prm.emissive:
-                rs_prefetch(&emission[f, 0])
-        f = prim[i]
-        if f < 0:
-            for c in range(3):
-                radiance[slot[i], c] += thr[c, i] * sky[c]
-            continue
-        if prm.emissive:
-            for c in range(3):
-                radiance[slot[i], c] += thr[c, i] * emission[f, c]
-        for c in range(3):
-            reflect[c] = thr[c, i] * albedo[f, c]      # the path's weight after this bounce
-        # facing geometric normal and the hit point, pushed off the surface
-        leave_surface(rays, t, normals, i, f, nrm, o)
-        # next-event estimation toward point lights (shadow rays)
-        for L in range(light_pos.shape[0]):
-            dist2 = 0.0
-            cosl = 0.0
-            for a in range(3):
-                wl[a] = light_pos[L, a] - o[a]
-                dist2 = dist2 + wl[a] * wl[a]
-                cosl = cosl + wl[a] * nrm[a]
-            if not (cosl > 0 and dist2 > 0):     # behind the surface, or at the light
+    cdef float w0, w1, w2, dist2, cosl, dist, inv_dist, q, best, lx, ly, lz, intensity
+    cdef HitBlock b
+    cdef float reflect[3][LANES]       # the path's weight after this bounce (thr * albedo)
+    cdef float weight[LANES]
+    cdef uint32_t key[LANES]           # the path's random-number key
+    cdef int32_t ok[LANES], sel[LANES]
+    cdef float *row
+    for blk in range((n + LANES - 1) // LANES):
+        i0 = blk * LANES
+        # the hits of the next LANES rays into a block; misses and emission add at once
+        b.n = 0
+        for i in range(i0, min(i0 + LANES, n)):
+            if i + PREFETCH_AHEAD < n and prim[i + PREFETCH_AHEAD] >= 0:
+                # the face data of a ray further on, which its hit makes a random access
+                f = prim[i + PREFETCH_AHEAD]
+                rs_prefetch(&normals[f, 0])
+                rs_prefetch(&albedo[f, 0])
+                if prm.emissive:
+                    rs_prefetch(&emission[f, 0])
+            f = prim[i]
+            if f < 0:
+                for c in range(3):
+                    radiance[slot[i], c] += thr[c, i] * sky[c]
                 continue
-            dist = sqrtf(dist2)
-            inv_dist = <float>1.0 / dist
-            for a in range(3):
-                wl[a] = wl[a] * inv_dist
-            # BRDF (albedo / pi) * cos(light, normal) * intensity / distance^2
-            weight = cosl * inv_dist * inv_pi / dist2
-            j = stage_ray(&sh, o, wl, dist, i, slot[i])
+            if prm.emissive:
+                for c in range(3):
+                    radiance[slot[i], c] += thr[c, i] * emission[f, c]
+            h = b.n
             for c in range(3):
-                sh.weight[c][j] = reflect[c] * light_int[L, c] * weight
-            if sh.count == STAGE_RAYS:
-                write_staged(&sh, sh_rays, sh_contrib, sh_parent, &sh_slot[0])
+                reflect[c][h] = thr[c, i] * albedo[f, c]
+            if bounce:
+                key[h] = sample_key(seed_k, pixel[i], sample[i])
+            add_hit(&b, rays, t, normals, i, f)
+        if b.n == 0:
+            continue
+        leave_surfaces(&b)
+        # next-event estimation toward point lights: a shadow ray per lit hit
+        for L in range(light_pos.shape[0]):
+            lx = light_pos[L, 0]
+            ly = light_pos[L, 1]
+            lz = light_pos[L, 2]
+            for h in range(b.n):
+                w0 = lx - b.o[0][h]
+                w1 = ly - b.o[1][h]
+                w2 = lz - b.o[2][h]
+                dist2 = w0 * w0 + w1 * w1 + w2 * w2
+                cosl = w0 * b.nrm[0][h] + w1 * b.nrm[1][h] + w2 * b.nrm[2][h]
+                ok[h] = (cosl > 0) & (dist2 > 0)      # not behind the surface, not at the light
+                dist = sqrtf(dist2)
+                inv_dist = <float>1.0 / dist
+                b.w[0][h] = w0 * inv_dist
+                b.w[1][h] = w1 * inv_dist
+                b.w[2][h] = w2 * inv_dist
+                b.tmax[h] = dist
+                # BRDF (albedo / pi) * cos(light, normal) / distance^2
+                weight[h] = cosl * inv_dist * inv_pi / dist2
+            count = 0
+            for h in range(b.n):
+                sel[count] = h
+                count += ok[h]
+            if count == 0:
+                continue
+            write_rays(&b, sel, count, sh_rays, m, 1)
+            for c in range(3):
+                intensity = light_int[L, c]
+                row = &sh_contrib[c, m]
+                for j in range(count):
+                    row[j] = reflect[c][sel[j]] * intensity * weight[sel[j]]
+            for j in range(count):
+                sh_parent[m + j] = b.ray[sel[j]]
+                sh_slot[m + j] = slot[b.ray[sel[j]]]
+            m += count
         if not bounce:
             continue
-        key = sample_key(seed_k, pixel[i], sample[i])
-        if roulette:                                 # Russian roulette (off by default)
-            best = reflect[0]
-            for c in range(1, 3):
-                if reflect[c] > best:
-                    best = reflect[c]
-            q = best if best < <float>0.95 else <float>0.95
-            if uniform_at(key, dim + 2) >= q:
-                continue
-            for c in range(3):
-                reflect[c] = reflect[c] / q
-        # cosine-weighted direction around the normal
-        cosine_direction(nrm, uniform_at(key, dim), uniform_at(key, dim + 1), w)
-        j = stage_ray(&nxt, o, w, INFINITY, i, 0)
+        # a cosine-weighted bounce per hit (per survivor of Russian roulette, off by default)
+        for h in range(b.n):
+            b.u1[h] = uniform_at(key[h], dim)
+            b.u2[h] = uniform_at(key[h], dim + 1)
+            b.tmax[h] = INFINITY
+        cosine_directions(&b)
+        count = 0
+        for h in range(b.n):
+            if roulette:
+                best = reflect[0][h]
+                for c in range(1, 3):
+                    if reflect[c][h] > best:
+                        best = reflect[c][h]
+                q = best if best < <float>0.95 else <float>0.95
+                if uniform_at(key[h], dim + 2) >= q:
+                    continue
+                for c in range(3):
+                    reflect[c][h] = reflect[c][h] / q
+            sel[count] = h
+            count += 1
+        if count == 0:
+            continue
+        write_rays(&b, sel, count, next_rays, k, 1)
         for c in range(3):
-            nxt.weight[c][j] = reflect[c]
-        if nxt.count == STAGE_RAYS:
-            write_staged(&nxt, next_rays, next_thr, next_parent, NULL)
-    if sh.count:
-        write_staged(&sh, sh_rays, sh_contrib, sh_parent, &sh_slot[0])
-    if nxt.count:
-        write_staged(&nxt, next_rays, next_thr, next_parent, NULL)
-    n_next[0] = nxt.written
-    n_shadow[0] = sh.written
+            row = &next_thr[c, k]
+            for j in range(count):
+                row[j] = reflect[c][sel[j]]
+        for j in range(count):
+            next_parent[k + j] = b.ray[sel[j]]
+        k += count
+    n_next[0] = k
+    n_shadow[0] = m
 
 
 def _shade(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
