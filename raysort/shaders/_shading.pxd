@@ -45,17 +45,17 @@ cdef struct HitBlock:
     float tmax[LANES]           # and its tmax
 
 
-cdef inline void add_hit(HitBlock *b, const float[:, ::1] rays, const float[::1] t,
-                         const float[:, ::1] normals, int i, int f) noexcept nogil:
-    """Put ray ``i`` of a batch (the ``RS_RAY_*`` rows), which hit face ``f``, in the
-    next lane."""
+cdef inline void add_hit(HitBlock *b, const float[:, ::1] rays, const float[::1] t, int i,
+                         const float *normal) noexcept nogil:
+    """Put ray ``i`` of a batch (the ``RS_RAY_*`` rows), which hit a face with this
+    ``normal``, in the next lane."""
     cdef int h = b.n, a
     b.ray[h] = i
     b.t[h] = t[i]
     for a in range(3):
         b.o[a][h] = rays[RS_RAY_OX + a, i]
         b.d[a][h] = rays[RS_RAY_DX + a, i]
-        b.nrm[a][h] = normals[f, a]
+        b.nrm[a][h] = normal[a]
     b.n = h + 1
 
 
@@ -139,20 +139,32 @@ cdef inline void cosine_directions(HitBlock *b) noexcept nogil:
 
 cdef inline void write_rays(const HitBlock *b, const int32_t *sel, int count,
                             float[:, ::1] out, int k, int step) noexcept nogil:
-    """Write the new rays (``o``, ``w``, 0, ``tmax``) of lanes ``sel[:count]`` as rays
-    ``k, k + step, k + 2 step, ...`` of a batch's rows."""
+    """Write the new rays (``o``, ``w``, 0, ``tmax``) of lanes ``sel[:count]`` (ascending)
+    as rays ``k, k + step, k + 2 step, ...`` of a batch's rows."""
     cdef int a, j
     cdef float *row
-    for a in range(3):
-        row = &out[RS_RAY_OX + a, k]
+    if count == b.n:       # every lane: sel is 0, 1, 2, ...
+        for a in range(3):
+            row = &out[RS_RAY_OX + a, k]
+            for j in range(count):
+                row[j * step] = b.o[a][j]
+            row = &out[RS_RAY_DX + a, k]
+            for j in range(count):
+                row[j * step] = b.w[a][j]
+        row = &out[RS_RAY_TMAX, k]
         for j in range(count):
-            row[j * step] = b.o[a][sel[j]]
-        row = &out[RS_RAY_DX + a, k]
+            row[j * step] = b.tmax[j]
+    else:
+        for a in range(3):
+            row = &out[RS_RAY_OX + a, k]
+            for j in range(count):
+                row[j * step] = b.o[a][sel[j]]
+            row = &out[RS_RAY_DX + a, k]
+            for j in range(count):
+                row[j * step] = b.w[a][sel[j]]
+        row = &out[RS_RAY_TMAX, k]
         for j in range(count):
-            row[j * step] = b.w[a][sel[j]]
+            row[j * step] = b.tmax[sel[j]]
     row = &out[RS_RAY_TMIN, k]
     for j in range(count):
         row[j * step] = 0.0
-    row = &out[RS_RAY_TMAX, k]
-    for j in range(count):
-        row[j * step] = b.tmax[sel[j]]

@@ -53,7 +53,7 @@ cdef int ao_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::
                     radiance[slot[i], c] += thr[c, i] * background
                 continue
             key[b.n] = sample_key(seed_k, pixel[i], sample[i])
-            add_hit(&b, rays, t, normals, i, f)
+            add_hit(&b, rays, t, i, &normals[f, 0])
         if b.n == 0:
             continue
         leave_surfaces(&b)

@@ -11,11 +11,19 @@ import numpy as np
 from raysort.params import boolean, integer
 from raysort.paths import Bounce, ShadowRays
 from raysort.plugin import Shader
-from raysort.rays import RayBatch
+from raysort.rays import RayBatch, aligned_empty
 
 
 cdef enum:
-    PREFETCH_AHEAD = 8      # rays between a face-data prefetch and its use
+    PREFETCH_AHEAD = 16     # rays between a face-data prefetch and its use
+
+# A face's shading data in one cache line (a hit is one random access): its geometric
+# normal, albedo and emission, each padded to four floats.
+cdef enum:
+    FACE_NORMAL = 0
+    FACE_ALBEDO = 4
+    FACE_EMISSION = 8
+    FACE_FLOATS = 16
 
 
 cdef struct ShadeParams:
@@ -28,8 +36,7 @@ cdef struct ShadeParams:
 
 
 cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
-                      const float[:, ::1] normals, const float[:, ::1] albedo,
-                      const float[:, ::1] emission, const float[::1] sky,
+                      const float[:, ::1] faces, const float[::1] sky,
                       const int32_t[::1] pixel, const int32_t[::1] sample,
                       const int32_t[::1] slot, const float[:, ::1] thr, ShadeParams prm,
                       const float[:, ::1] light_pos, const float[:, ::1] light_int,
@@ -57,11 +64,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
         for i in range(i0, min(i0 + LANES, n)):
             if i + PREFETCH_AHEAD < n and prim[i + PREFETCH_AHEAD] >= 0:
                 # the face data of a ray further on, which its hit makes a random access
-                f = prim[i + PREFETCH_AHEAD]
-                rs_prefetch(&normals[f, 0])
-                rs_prefetch(&albedo[f, 0])
-                if prm.emissive:
-                    rs_prefetch(&emission[f, 0])
+                rs_prefetch(&faces[prim[i + PREFETCH_AHEAD], 0])
             f = prim[i]
             if f < 0:
                 for c in range(3):
@@ -69,13 +72,13 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                 continue
             if prm.emissive:
                 for c in range(3):
-                    radiance[slot[i], c] += thr[c, i] * emission[f, c]
+                    radiance[slot[i], c] += thr[c, i] * faces[f, FACE_EMISSION + c]
             h = b.n
             for c in range(3):
-                reflect[c][h] = thr[c, i] * albedo[f, c]
+                reflect[c][h] = thr[c, i] * faces[f, FACE_ALBEDO + c]
             if bounce:
                 key[h] = sample_key(seed_k, pixel[i], sample[i])
-            add_hit(&b, rays, t, normals, i, f)
+            add_hit(&b, rays, t, i, &faces[f, FACE_NORMAL])
         if b.n == 0:
             continue
         leave_surfaces(&b)
@@ -152,8 +155,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
 
 
 def _shade(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
-           const float[:, ::1] normals, const float[:, ::1] albedo, const float[:, ::1] emission,
-           const float[::1] sky, const int32_t[::1] pixel, const int32_t[::1] sample,
+           const float[:, ::1] faces, const float[::1] sky, const int32_t[::1] pixel, const int32_t[::1] sample,
            const int32_t[::1] slot, const float[:, ::1] thr, int depth, int max_depth,
            uint32_t seed, bint russian_roulette, int rr_depth, bint emissive,
            const float[:, ::1] light_pos, const float[:, ::1] light_int,
@@ -165,7 +167,7 @@ def _shade(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim
                                        emissive)
     cdef int k = 0, m = 0
     with nogil:
-        shade_batch(rays, t, prim, normals, albedo, emission, sky, pixel, sample, slot, thr,
+        shade_batch(rays, t, prim, faces, sky, pixel, sample, slot, thr,
                     prm, light_pos, light_int, radiance, next_rays, next_parent, next_thr,
                     sh_rays, sh_parent, sh_slot, sh_contrib, &k, &m)
     return k, m
@@ -205,9 +207,14 @@ class LambertShader(Shader):
 
     def prepare(self, scene):
         lights = scene.lights if self.shadow_rays in (None, True) else []
+        faces = aligned_empty((len(scene.faces), FACE_FLOATS), np.float32, FACE_FLOATS * 4)
+        faces[:] = 0.0
+        faces[:, FACE_NORMAL:FACE_NORMAL + 3] = scene.face_normals()
+        faces[:, FACE_ALBEDO:FACE_ALBEDO + 3] = scene.albedo
+        faces[:, FACE_EMISSION:FACE_EMISSION + 3] = scene.emission
         self._prepared = (
             scene,
-            scene.face_normals(),
+            faces,
             np.ascontiguousarray([lt.position for lt in lights], dtype=np.float32).reshape(-1, 3),
             np.ascontiguousarray([lt.intensity for lt in lights], dtype=np.float32).reshape(-1, 3),
             bool(scene.emission.any()),
@@ -216,7 +223,7 @@ class LambertShader(Shader):
     def shade(self, scene, rays, hits, paths, depth, seed, radiance):
         if self._prepared is None or self._prepared[0] is not scene:
             self.prepare(scene)
-        _, normals, light_pos, light_int, emissive = self._prepared
+        _, faces, light_pos, light_int, emissive = self._prepared
         n = len(rays)
         next_rays = RayBatch(n)
         next_parent = np.empty(n, dtype=np.int32)
@@ -226,8 +233,7 @@ class LambertShader(Shader):
         sh_parent = np.empty(m_max, dtype=np.int32)
         sh_slot = np.empty(m_max, dtype=np.int32)
         sh_contrib = np.empty((3, m_max), dtype=np.float32)
-        k, m = _shade(rays.data, hits.t, hits.prim, normals, scene.albedo, scene.emission,
-                      scene.sky, paths.pixel, paths.sample, paths.slot, paths.throughput,
+        k, m = _shade(rays.data, hits.t, hits.prim, faces, scene.sky, paths.pixel, paths.sample, paths.slot, paths.throughput,
                       depth, self.max_depth, seed & 0xFFFFFFFF, self.russian_roulette,
                       self.rr_depth, emissive, light_pos, light_int,
                       radiance, next_rays.data, next_parent, next_thr, sh_rays.data,
