@@ -18,11 +18,12 @@ cdef enum:
     PREFETCH_AHEAD = 16     # rays between a face-data prefetch and its use
 
 # A face's shading data in one cache line (a hit is one random access): its geometric
-# normal, albedo and emission, each padded to four floats.
+# normal, albedo and emission, each padded to four floats, and whether it emits.
 cdef enum:
     FACE_NORMAL = 0
     FACE_ALBEDO = 4
     FACE_EMISSION = 8
+    FACE_EMITS = 11         # 1 if any channel of the emission is not zero, else 0
     FACE_FLOATS = 16
 
 
@@ -32,7 +33,6 @@ cdef struct ShadeParams:
     uint32_t seed
     bint russian_roulette
     int rr_depth
-    bint emissive
 
 
 cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
@@ -70,7 +70,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                 for c in range(3):
                     radiance[slot[i], c] += thr[c, i] * sky[c]
                 continue
-            if prm.emissive:
+            if faces[f, FACE_EMITS] != 0:
                 for c in range(3):
                     radiance[slot[i], c] += thr[c, i] * faces[f, FACE_EMISSION + c]
             h = b.n
@@ -155,16 +155,16 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
 
 
 def _shade(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
-           const float[:, ::1] faces, const float[::1] sky, const int32_t[::1] pixel, const int32_t[::1] sample,
-           const int32_t[::1] slot, const float[:, ::1] thr, int depth, int max_depth,
-           uint32_t seed, bint russian_roulette, int rr_depth, bint emissive,
+           const float[:, ::1] faces, const float[::1] sky, const int32_t[::1] pixel,
+           const int32_t[::1] sample, const int32_t[::1] slot, const float[:, ::1] thr,
+           int depth, int max_depth,
+           uint32_t seed, bint russian_roulette, int rr_depth,
            const float[:, ::1] light_pos, const float[:, ::1] light_int,
            double[:, ::1] radiance, float[:, ::1] next_rays, int32_t[::1] next_parent,
            float[:, ::1] next_thr, float[:, ::1] sh_rays, int32_t[::1] sh_parent,
            int32_t[::1] sh_slot, float[:, ::1] sh_contrib):
     """Typed entry point: shade a batch without the GIL; returns (next rays, shadow rays)."""
-    cdef ShadeParams prm = ShadeParams(depth, max_depth, seed, russian_roulette, rr_depth,
-                                       emissive)
+    cdef ShadeParams prm = ShadeParams(depth, max_depth, seed, russian_roulette, rr_depth)
     cdef int k = 0, m = 0
     with nogil:
         shade_batch(rays, t, prim, faces, sky, pixel, sample, slot, thr,
@@ -206,24 +206,25 @@ class LambertShader(Shader):
         self._prepared = None
 
     def prepare(self, scene):
+        """Cache the scene's face records and lights (``render`` calls this first)."""
         lights = scene.lights if self.shadow_rays in (None, True) else []
         faces = aligned_empty((len(scene.faces), FACE_FLOATS), np.float32, FACE_FLOATS * 4)
         faces[:] = 0.0
         faces[:, FACE_NORMAL:FACE_NORMAL + 3] = scene.face_normals()
         faces[:, FACE_ALBEDO:FACE_ALBEDO + 3] = scene.albedo
         faces[:, FACE_EMISSION:FACE_EMISSION + 3] = scene.emission
+        faces[:, FACE_EMITS] = (scene.emission != 0).any(axis=1)
         self._prepared = (
             scene,
             faces,
             np.ascontiguousarray([lt.position for lt in lights], dtype=np.float32).reshape(-1, 3),
             np.ascontiguousarray([lt.intensity for lt in lights], dtype=np.float32).reshape(-1, 3),
-            bool(scene.emission.any()),
         )
 
     def shade(self, scene, rays, hits, paths, depth, seed, radiance):
         if self._prepared is None or self._prepared[0] is not scene:
             self.prepare(scene)
-        _, faces, light_pos, light_int, emissive = self._prepared
+        _, faces, light_pos, light_int = self._prepared
         n = len(rays)
         next_rays = RayBatch(n)
         next_parent = np.empty(n, dtype=np.int32)
@@ -233,9 +234,9 @@ class LambertShader(Shader):
         sh_parent = np.empty(m_max, dtype=np.int32)
         sh_slot = np.empty(m_max, dtype=np.int32)
         sh_contrib = np.empty((3, m_max), dtype=np.float32)
-        k, m = _shade(rays.data, hits.t, hits.prim, faces, scene.sky, paths.pixel, paths.sample, paths.slot, paths.throughput,
-                      depth, self.max_depth, seed & 0xFFFFFFFF, self.russian_roulette,
-                      self.rr_depth, emissive, light_pos, light_int,
+        k, m = _shade(rays.data, hits.t, hits.prim, faces, scene.sky, paths.pixel,
+                      paths.sample, paths.slot, paths.throughput, depth, self.max_depth,
+                      seed & 0xFFFFFFFF, self.russian_roulette, self.rr_depth, light_pos, light_int,
                       radiance, next_rays.data, next_parent, next_thr, sh_rays.data,
                       sh_parent, sh_slot, sh_contrib)
         shadow = None
