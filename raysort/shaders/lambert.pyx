@@ -44,7 +44,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                       float[:, ::1] next_rays, int32_t[::1] next_parent, float[:, ::1] next_thr,
                       float[:, ::1] sh_rays, int32_t[::1] sh_parent, int32_t[::1] sh_slot,
                       float[:, ::1] sh_contrib, int *n_next, int *n_shadow) noexcept nogil:
-    cdef int n = prim.shape[0], blk, i0, i, f, a, c, h, j, L, count, k = 0, m = 0
+    cdef int n = prim.shape[0], blk, i0, i, f, c, h, j, L, count, k = 0, m = 0
     cdef uint32_t dim = RS_DIM_BOUNCE + RS_DIMS_PER_BOUNCE * prm.depth   # types.h's budget
     cdef uint32_t seed_k = seed_key(prm.seed)
     cdef bint bounce = prm.depth < prm.max_depth
@@ -53,13 +53,14 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
     cdef float w0, w1, w2, dist2, cosl, dist, inv_dist, q, best, lx, ly, lz, intensity
     cdef HitBlock b
     cdef float reflect[3][LANES]       # the path's weight after this bounce (thr * albedo)
-    cdef float weight[LANES]
+    cdef float weight[LANES]           # a shadow ray's BRDF * cosine / distance^2
     cdef uint32_t key[LANES]           # the path's random-number key
-    cdef int32_t ok[LANES], sel[LANES]
+    cdef int32_t ok[LANES]             # 1 where the lane's shadow ray is made
+    cdef int32_t sel[LANES]            # the lanes that make a ray, ascending
     cdef float *row
     for blk in range((n + LANES - 1) // LANES):
         i0 = blk * LANES
-        # the hits of the next LANES rays into a block; misses and emission add at once
+        # the hits of the next LANES rays into a block; misses add the sky, emitters their light
         b.n = 0
         for i in range(i0, min(i0 + LANES, n)):
             if i + PREFETCH_AHEAD < n and prim[i + PREFETCH_AHEAD] >= 0:
