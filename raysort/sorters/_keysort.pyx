@@ -62,7 +62,7 @@ cdef float QMAX = 65535.0   # 2**COORD_BITS - 1
 cdef float ONE = 1.0        # float constants: a bare 0.5 or 1.0 would make the C double
 cdef float HALF = 0.5
 cdef enum:
-    BLOCK = 64              # rays whose coordinates are computed together, loop by loop
+    BLOCK = 256             # rays whose coordinates are computed together, loop by loop
 #: bits of the octant prefix (the signs of dx, dy, dz)
 OCTANT_BITS = 3
 
@@ -175,7 +175,7 @@ cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcep
     cdef int b, j, k, m, n_coords = 5 if a.mode == DIR_OCTAHEDRAL else 6
     cdef float c[KEY_COORDS * BLOCK]
     cdef int32_t q[KEY_COORDS * BLOCK]
-    cdef uint64_t key
+    cdef uint64_t *kb
     cdef const uint64_t *table = a.table
     b = start
     while b < start + n:
@@ -184,20 +184,35 @@ cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcep
         for k in range(n_coords):
             for j in range(m):
                 q[k * BLOCK + j] = <int32_t> (unit(c[k * BLOCK + j]) * QMAX)
-        for j in range(m):
-            key = 0
-            if a.low_bytes:
-                for k in range(n_coords):
-                    key |= (table[(2 * k) * 256 + (q[k * BLOCK + j] & 255)]
-                            | table[(2 * k + 1) * 256 + (q[k * BLOCK + j] >> 8)])
-            else:               # a short key uses only the top byte of every coordinate
-                for k in range(n_coords):
-                    key |= table[(2 * k + 1) * 256 + (q[k * BLOCK + j] >> 8)]
-            if a.octant:        # the direction's octant first (bit k: d[k] < 0)
-                key = (key >> 3 | <uint64_t> (a.d[0][b + j] < 0) << 63
-                       | <uint64_t> (a.d[1][b + j] < 0) << 62
-                       | <uint64_t> (a.d[2][b + j] < 0) << 61)
-            keys[b - start + j] = key
+        # the key is the OR of one table entry per byte of each quantised coordinate
+        kb = keys + (b - start)
+        if not a.low_bytes and n_coords == 6:   # the common short key: one loop, no stores
+            for j in range(m):
+                kb[j] = (table[1 * 256 + (q[0 * BLOCK + j] >> 8)]
+                         | table[3 * 256 + (q[1 * BLOCK + j] >> 8)]
+                         | table[5 * 256 + (q[2 * BLOCK + j] >> 8)]
+                         | table[7 * 256 + (q[3 * BLOCK + j] >> 8)]
+                         | table[9 * 256 + (q[4 * BLOCK + j] >> 8)]
+                         | table[11 * 256 + (q[5 * BLOCK + j] >> 8)])
+        elif not a.low_bytes:
+            for j in range(m):
+                kb[j] = (table[1 * 256 + (q[0 * BLOCK + j] >> 8)]
+                         | table[3 * 256 + (q[1 * BLOCK + j] >> 8)]
+                         | table[5 * 256 + (q[2 * BLOCK + j] >> 8)]
+                         | table[7 * 256 + (q[3 * BLOCK + j] >> 8)]
+                         | table[9 * 256 + (q[4 * BLOCK + j] >> 8)])
+        else:                   # a long key: both bytes of every coordinate
+            for j in range(m):
+                kb[j] = 0
+            for k in range(n_coords):
+                for j in range(m):
+                    kb[j] |= (table[(2 * k) * 256 + (q[k * BLOCK + j] & 255)]
+                              | table[(2 * k + 1) * 256 + (q[k * BLOCK + j] >> 8)])
+        if a.octant:            # the direction's octant first (bit k: d[k] < 0)
+            for j in range(m):
+                kb[j] = (kb[j] >> 3 | <uint64_t> (a.d[0][b + j] < 0) << 63
+                         | <uint64_t> (a.d[1][b + j] < 0) << 62
+                         | <uint64_t> (a.d[2][b + j] < 0) << 61)
         b += m
 
 
@@ -313,11 +328,13 @@ def key_table(levels):
 # sorting
 
 cdef int radix_sort(uint64_t *key, int32_t *item, uint64_t *key_tmp, int32_t *item_tmp,
-                    int n, int digits) noexcept nogil:
-    """Stable LSD radix sort of (key, item) by the top ``digits`` bytes of key.
+                    int n, int digits, int32_t (*count)[256]) noexcept nogil:
+    """Stable LSD radix sort of (key, item) by the top ``digits`` bytes of key; item
+    may be NULL (the item is then in the key's low bits, which no pass looks at).
+    ``count[j]`` holds the histogram of byte j (from the top) of the keys; the sort
+    uses it up.
 
     Returns 1 when the result is in the tmp arrays, 0 when in key/item."""
-    cdef int32_t count[8][256]
     cdef int i, j, shift, flip = 0
     cdef int32_t pos, c
     cdef uint64_t *ks = key
@@ -326,10 +343,7 @@ cdef int radix_sort(uint64_t *key, int32_t *item, uint64_t *key_tmp, int32_t *it
     cdef int32_t *id_ = item_tmp
     cdef uint64_t *kt
     cdef int32_t *it
-    memset(count, 0, digits * sizeof(count[0]))
-    for i in range(n):
-        for j in range(digits):
-            count[j][(key[i] >> (56 - 8 * j)) & 255] += 1
+    cdef uint64_t k
     for j in range(digits - 1, -1, -1):
         shift = 56 - 8 * j
         if count[j][(key[0] >> shift) & 255] == n:
@@ -339,17 +353,25 @@ cdef int radix_sort(uint64_t *key, int32_t *item, uint64_t *key_tmp, int32_t *it
             c = count[j][i]
             count[j][i] = pos
             pos += c
-        for i in range(n):
-            c = count[j][(ks[i] >> shift) & 255]
-            count[j][(ks[i] >> shift) & 255] = c + 1
-            kd[c] = ks[i]
-            id_[c] = is_[i]
+        if item == NULL:
+            for i in range(n):
+                k = ks[i]
+                c = count[j][(k >> shift) & 255]
+                count[j][(k >> shift) & 255] = c + 1
+                kd[c] = k
+        else:
+            for i in range(n):
+                k = ks[i]
+                c = count[j][(k >> shift) & 255]
+                count[j][(k >> shift) & 255] = c + 1
+                kd[c] = k
+                id_[c] = is_[i]
+            it = is_
+            is_ = id_
+            id_ = it
         kt = ks
         ks = kd
         kd = kt
-        it = is_
-        is_ = id_
-        id_ = it
         flip ^= 1
     return flip
 
@@ -362,39 +384,57 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     order[start:end]; write sub-packet starts to offsets and return their number.
     Work buffers hold end - start (+1) items."""
     cdef int i, j, c, nc = 0, pos, last, flip
-    cdef uint64_t mask
+    cdef uint64_t mask, low, key, prev = 0
     cdef uint64_t *sk
     cdef int32_t *si
-    # chunks: every ray, or (compress) every run of equal keys in input order
-    if compress:
-        for i in range(end - start):
-            if i == 0 or keys[i] != keys[i - 1]:
-                ckey[nc] = keys[i]
+    # a chunk is every ray, or (compress) every run of equal keys in input order
+    cdef int n = end - start, bits = 8 * digits
+    # the chunk's index goes into the key's low bits, which the sort does not look at,
+    # when they have room for it (so one array moves instead of two); the index is in
+    # input order, so the sort stays stable
+    cdef bint packed = bits <= 48 and split_bits <= bits and n <= (<int64_t> 1) << (64 - bits)
+    cdef int32_t *items = NULL if packed else citem
+    mask = (~(<uint64_t> 0) << (64 - bits)) if bits < 64 else ~(<uint64_t> 0)
+    low = ~mask
+    cdef int32_t count[8][256]
+    memset(count, 0, digits * sizeof(count[0]))
+    # (keys may be ckey itself: chunk nc <= ray i is written after ray i is read)
+    for i in range(n):
+        key = keys[i]
+        if not compress or i == 0 or key != prev:
+            if packed:
+                ckey[nc] = (key & mask) | <uint64_t> nc
+            else:
+                ckey[nc] = key
                 citem[nc] = nc
-                cstart[nc] = start + i
-                nc += 1
-        cstart[nc] = end
-    else:
-        nc = end - start
-        for i in range(nc):
-            ckey[i] = keys[i]
-            citem[i] = start + i
-    flip = radix_sort(ckey, citem, ckey_tmp, citem_tmp, nc, digits)
+            cstart[nc] = start + i
+            nc += 1
+            # the radix sort's histograms, in the same pass
+            count[0][key >> 56] += 1
+            if digits > 1:
+                count[1][(key >> 48) & 255] += 1
+            if digits > 2:
+                count[2][(key >> 40) & 255] += 1
+            for j in range(3, digits):
+                count[j][(key >> (56 - 8 * j)) & 255] += 1
+        prev = key
+    cstart[nc] = end
+    flip = radix_sort(ckey, items, ckey_tmp, citem_tmp, nc, digits, count)
     sk = ckey_tmp if flip else ckey
     si = citem_tmp if flip else citem
-    if compress:
-        # decompress: each chunk's rays, in input order, at the chunk's sorted place
-        pos = start
-        for j in range(nc):
-            c = si[j]
+    # decompress: each chunk's rays, in input order, at the chunk's sorted place
+    pos = start
+    for j in range(nc):
+        c = <int> (sk[j] & low) if packed else si[j]
+        if compress:
             for i in range(cstart[c], cstart[c + 1]):
                 order[pos] = i
                 skey[pos - start] = sk[j]
                 pos += 1
+        else:
+            order[start + j] = start + c
+    if compress:
         sk = skey
-    else:
-        for j in range(nc):
-            order[start + j] = si[j]
     # sub-packets: at most packet_size rays, and a new one where the key's top bits change
     mask = 0 if split_bits == 0 else ~(<uint64_t> 0) << (64 - split_bits)
     c = 0
@@ -427,16 +467,16 @@ cdef object sort_packets(const KeyInputs *a, const uint64_t *keys, const int32_t
     offsets = np.empty(n + 1, dtype=np.int32)
     cdef int32_t[::1] order_mv = order, offsets_mv = offsets
     cdef uint64_t[::1] ckey = np.empty(widest, np.uint64), ckey_tmp = np.empty(widest, np.uint64)
-    cdef uint64_t[::1] skey = np.empty(widest, np.uint64), pkey = np.empty(widest, np.uint64)
+    cdef uint64_t[::1] skey = np.empty(widest, np.uint64)
     cdef int32_t[::1] citem = np.empty(widest, np.int32), citem_tmp = np.empty(widest, np.int32)
     cdef int32_t[::1] cstart = np.empty(widest + 1, np.int32)
     cdef const uint64_t *kp
     with nogil:
         for p in range(n_packets):
             if packets[p + 1] > packets[p]:
-                if a != NULL:
-                    ray_keys(a, packets[p], packets[p + 1] - packets[p], &pkey[0])
-                    kp = &pkey[0]
+                if a != NULL:       # sort_packet reads the keys from its own work buffer
+                    ray_keys(a, packets[p], packets[p + 1] - packets[p], &ckey[0])
+                    kp = &ckey[0]
                 else:
                     kp = keys + packets[p]
                 n_sub += sort_packet(kp, packets[p], packets[p + 1], digits, compress,
