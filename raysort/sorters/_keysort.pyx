@@ -58,7 +58,6 @@ COORDINATES = {"components": DIR_COMPONENTS, "octahedral": DIR_OCTAHEDRAL,
 # the end point is pulled this much inside the box it would leave (Meister's hippie does
 # the same), so that a ray ending on the far wall keeps its wall's cell
 cdef float EXIT_SHRINK = 1.0 - 1.0e-3
-cdef float QMAX = 65535.0   # 2**COORD_BITS - 1
 cdef float ONE = 1.0        # float constants: a bare 0.5 or 1.0 would make the C double
 cdef float HALF = 0.5
 cdef enum:
@@ -84,14 +83,27 @@ cdef extern from *:
         for (; j < m; ++j)
             out[j] = 1.0f / sqrtf(x[j]);
     }
+    /* q[j] = (int)(min(max(c[j], 0), 1) * 65535): a coordinate clamped to [0, 1] (NaN
+     * -> 0) and quantised to 16 bits (COORD_BITS: 65535 = 2^16 - 1).  MAXPS/MINPS return the second operand on NaN,
+     * as rs_maxf/rs_minf do, so every ISA gives the same q; written with intrinsics
+     * because the compiler leaves the branchy scalar form unvectorised. */
+    static inline void rs_keysort_quantise(const float *c, int32_t *q, int m)
+    {
+        int j = 0;
+    #if RS_SSE
+        const __m128 zero = _mm_setzero_ps(), one = _mm_set1_ps(1.0f), qmax = _mm_set1_ps(65535.0f);
+        for (; j + 4 <= m; j += 4) {
+            __m128 x = _mm_min_ps(_mm_max_ps(_mm_loadu_ps(c + j), zero), one);
+            _mm_storeu_si128((__m128i *)(q + j), _mm_cvttps_epi32(_mm_mul_ps(x, qmax)));
+        }
+    #endif
+        for (; j < m; ++j)
+            q[j] = (int32_t)(rs_minf(rs_maxf(c[j], 0.0f), 1.0f) * 65535.0f);
+    }
     """
     float pick "rs_keysort_pick"(bint c, float a, float b) noexcept nogil
     void inv_sqrt "rs_keysort_inv_sqrt"(const float *x, float *out, int m) noexcept nogil
-
-
-cdef inline float unit(float x) noexcept nogil:
-    """x clamped to [0, 1]; NaN -> 0 (MAXSS/MINSS semantics: no branch)."""
-    return rs_minf(rs_maxf(x, 0), 1)
+    void quantise "rs_keysort_quantise"(const float *c, int32_t *q, int m) noexcept nogil
 
 
 cdef struct KeyInputs:
@@ -182,8 +194,7 @@ cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcep
         m = min(<int> BLOCK, start + n - b)
         block_coordinates(a, b, m, c)
         for k in range(n_coords):
-            for j in range(m):
-                q[k * BLOCK + j] = <int32_t> (unit(c[k * BLOCK + j]) * QMAX)
+            quantise(&c[k * BLOCK], &q[k * BLOCK], m)
         # the key is the OR of one table entry per byte of each quantised coordinate
         kb = keys + (b - start)
         if not a.low_bytes and n_coords == 6:   # the common short key: one loop, no stores
@@ -397,44 +408,54 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     mask = (~(<uint64_t> 0) << (64 - bits)) if bits < 64 else ~(<uint64_t> 0)
     low = ~mask
     cdef int32_t count[8][256]
-    memset(count, 0, digits * sizeof(count[0]))
-    # (keys may be ckey itself: chunk nc <= ray i is written after ray i is read)
-    for i in range(n):
-        key = keys[i]
-        if not compress or i == 0 or key != prev:
-            if packed:
-                ckey[nc] = (key & mask) | <uint64_t> nc
-            else:
-                ckey[nc] = key
-                citem[nc] = nc
-            cstart[nc] = start + i
-            nc += 1
-            # the radix sort's histograms, in the same pass
+    cdef bint simple = packed and not compress
+    memset(count, 0, max(digits, 3) * sizeof(count[0]))
+    # chunks and the radix sort's histograms, in one pass (keys may be ckey itself:
+    # chunk nc <= ray i is written after ray i is read)
+    if simple:                      # the common case, in one tight loop
+        for i in range(n):
+            key = keys[i]
+            ckey[i] = (key & mask) | <uint64_t> i
             count[0][key >> 56] += 1
-            if digits > 1:
-                count[1][(key >> 48) & 255] += 1
-            if digits > 2:
-                count[2][(key >> 40) & 255] += 1
+            count[1][(key >> 48) & 255] += digits > 1
+            count[2][(key >> 40) & 255] += digits > 2
             for j in range(3, digits):
                 count[j][(key >> (56 - 8 * j)) & 255] += 1
-        prev = key
-    cstart[nc] = end
+        nc = n
+    else:
+        for i in range(n):
+            key = keys[i]
+            if not compress or i == 0 or key != prev:
+                if packed:
+                    ckey[nc] = (key & mask) | <uint64_t> nc
+                else:
+                    ckey[nc] = key
+                    citem[nc] = nc
+                cstart[nc] = start + i
+                nc += 1
+                for j in range(digits):
+                    count[j][(key >> (56 - 8 * j)) & 255] += 1
+            prev = key
+        cstart[nc] = end
     flip = radix_sort(ckey, items, ckey_tmp, citem_tmp, nc, digits, count)
     sk = ckey_tmp if flip else ckey
     si = citem_tmp if flip else citem
-    # decompress: each chunk's rays, in input order, at the chunk's sorted place
-    pos = start
-    for j in range(nc):
-        c = <int> (sk[j] & low) if packed else si[j]
-        if compress:
+    if simple:
+        for j in range(nc):
+            order[start + j] = start + <int> (sk[j] & low)
+    elif compress:
+        # decompress: each chunk's rays, in input order, at the chunk's sorted place
+        pos = start
+        for j in range(nc):
+            c = <int> (sk[j] & low) if packed else si[j]
             for i in range(cstart[c], cstart[c + 1]):
                 order[pos] = i
                 skey[pos - start] = sk[j]
                 pos += 1
-        else:
-            order[start + j] = start + c
-    if compress:
         sk = skey
+    else:
+        for j in range(nc):
+            order[start + j] = start + si[j]
     # sub-packets: at most packet_size rays, and a new one where the key's top bits change
     mask = 0 if split_bits == 0 else ~(<uint64_t> 0) << (64 - split_bits)
     c = 0
