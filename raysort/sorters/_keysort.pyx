@@ -132,13 +132,19 @@ cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept
     cdef int j, k
     cdef float inv[BLOCK]
     cdef float ell[BLOCK]
-    cdef float u, v, s, below, L, p, t, ex, r
+    cdef float u, v, s, below, L, p, t, ex, r, lo, hi, scale
+    # everything the loops read in locals: a store to c could alias *a, which would
+    # keep the compiler from vectorising
     cdef const float *dx = a.d[0] + b
     cdef const float *dy = a.d[1] + b
     cdef const float *dz = a.d[2] + b
+    cdef const float *o
+    cdef const float *d
+    cdef float *out
     for k in range(3):
+        o, out, lo, scale = a.o[k] + b, c + k * BLOCK, a.lo[k], a.scale[k]
         for j in range(m):
-            c[k * BLOCK + j] = (a.o[k][b + j] - a.lo[k]) * a.scale[k]
+            out[j] = (o[j] - lo) * scale
     if a.mode == DIR_OCTAHEDRAL:
         # the octahedral map divides by |d|_1 itself and needs no unit vector
         for j in range(m):
@@ -156,8 +162,9 @@ cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept
     inv_sqrt(inv, inv, m)
     if a.mode == DIR_COMPONENTS:
         for k in range(3):
+            d, out = a.d[k] + b, c + (3 + k) * BLOCK
             for j in range(m):
-                c[(3 + k) * BLOCK + j] = HALF * (a.d[k][b + j] * inv[j]) + HALF
+                out[j] = HALF * (d[j] * inv[j]) + HALF
         return
     # END_POINT: o + L d/|d|, L the estimated length clamped to tmax and the box exit
     for j in range(m):
@@ -177,9 +184,9 @@ cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept
                                      (a.hi[k] - a.o[k][b + j]) * r))
         ell[j] = rs_minf(rs_maxf(ex * EXIT_SHRINK, 0), L)
     for k in range(3):
+        o, d, out, lo, scale = a.o[k] + b, a.d[k] + b, c + (3 + k) * BLOCK, a.lo[k], a.scale[k]
         for j in range(m):
-            c[(3 + k) * BLOCK + j] = (a.o[k][b + j] + ell[j] * (a.d[k][b + j] * inv[j])
-                                      - a.lo[k]) * a.scale[k]
+            out[j] = (o[j] + ell[j] * (d[j] * inv[j]) - lo) * scale
 
 
 cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcept nogil:
