@@ -2,6 +2,7 @@
 
     python tests/benchmarks/sort_cost.py [scene ...] [--sorters a,b] [--traversals wide8,stream]
                                          [--rounds 7] [--size 256] [--json out.json]
+                                         [--markdown]
 
 For each scene (default: sibenik, sponza, forest) the first-bounce diffuse rays of a
 ``--size`` square render at 1 spp (:func:`raysort.workloads.workload`, the rays ``raysort
@@ -13,6 +14,8 @@ shuffled per round, after one untimed warm-up round (:func:`raysort.bench.rounds
 Per configuration it prints the medians of sort, gather and trace [min-max], and the median of
 the per-round shares (sort + gather) / trace [min-max]: the budget of issue 13 is 10 %.  Every
 configuration's hits must equal the first one's (t bit for bit, prim), or the run fails.
+``--markdown`` also prints each scene as a Markdown table (sorters by rows, one sort + gather
+share column per traversal), as BENCHMARKS.md shows it.
 """
 import argparse
 import json
@@ -80,6 +83,26 @@ def spread_pct(s):
     return f"{100 * s['median']:5.1f} % [{100 * s['min']:.1f}-{100 * s['max']:.1f}]"
 
 
+def markdown(scene, rows, traversals):
+    """One scene's rows as a Markdown table: a row per sorter, the sort and gather medians
+    (of the first traversal's rounds) and the median share [min-max] per traversal."""
+    by = {(r["sorter"], r["traversal"]): r for r in rows}
+    sorters = list(dict.fromkeys(r["sorter"] for r in rows))
+    head = ["sorter", "sort ms", "gather ms"] + [f"{t} ms" for t in traversals] + \
+        [f"share vs {t}" for t in traversals]
+    lines = [f"{scene}:", "", "| " + " | ".join(head) + " |",
+             "| --- |" + " ---: |" * (len(head) - 1)]
+    for s in sorters:
+        first = by[s, traversals[0]]
+        cells = [s, f"{1e3 * first['sort']['median']:.2f}", f"{1e3 * first['gather']['median']:.2f}"]
+        cells += [f"{1e3 * by[s, t]['trace']['median']:.1f}" for t in traversals]
+        cells += [f"{100 * by[s, t]['share']['median']:.1f} % "
+                  f"[{100 * by[s, t]['share']['min']:.1f}–{100 * by[s, t]['share']['max']:.1f}]"
+                  for t in traversals]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenes", nargs="*", default=["sibenik", "sponza", "forest"])
@@ -90,6 +113,7 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=256, help="image edge in pixels (256)")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--json", default=None, help="also write the results here")
+    parser.add_argument("--markdown", action="store_true", help="also print Markdown tables")
     args = parser.parse_args(argv)
     sorters = (args.sorters.split(",") if args.sorters
                else [s for s in registry.available("sorters")])
@@ -126,6 +150,9 @@ def main(argv=None):
         sys.stdout.flush()
     report["load"]["after"] = load_average()
     print(f"\nload after: {report['load']['after']}")
+    if args.markdown:
+        for name, scene in report["scenes"].items():
+            print("\n" + markdown(name, scene["rows"], traversals))
     if args.json:
         with open(args.json, "w", encoding="utf-8") as fh:
             json.dump(report, fh, indent=1)
