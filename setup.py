@@ -31,6 +31,7 @@ INCLUDE = "raysort/include"
 # README's "ISAs" section.
 ISA_MODULES = [
     "_gather",
+    "_contract",
     "sorters.nah",
     "sorters._keysort",
     "traversals.single",

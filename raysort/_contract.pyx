@@ -7,15 +7,19 @@ first offending position; :mod:`raysort.contract` turns that into a message.
 The loops are written for valid input, which is every frame: a block of
 elements (a sub-packet, or ``CHUNK`` values) is tested without branches
 (``bad |= ...`` over plain pointers, which the compiler vectorises) and only a
-block found bad is scanned again for its first offending element.  A float
-``x`` is finite exactly when ``x - x == 0``.  The functions take int32 or
-int64 index arrays (the caller converts other integer types).
+block found bad is scanned again for its first offending element.  A float is
+finite exactly when its exponent bits are not all set (tested on its bits, which
+vectorises), equivalently when ``x - x == 0``.  The functions take int32 (the
+sort result) or int32/int64 index arrays (the caller converts other types).
 """
-from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
+from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t, uint64_t
 from libc.stdlib cimport calloc, free
-from libc.string cimport memset
+from libc.string cimport memcmp, memset
+from raysort._checks cimport (ray_bad, closest_bad, any_hit_bad, large_packet,
+                              sub_packet_bad)
 from raysort._types cimport (RS_RAY_OX, RS_RAY_OY, RS_RAY_OZ, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ,
-                             RS_RAY_TMIN, RS_RAY_TMAX, RS_RAY_ROWS, RS_PACKET_TMIN, RS_PACKET_T)
+                             RS_RAY_TMIN, RS_RAY_TMAX, RS_RAY_ROWS, RS_PACKET_ROWS,
+                             RS_PACKET_TMIN, RS_PACKET_T)
 
 import numpy as np
 
@@ -28,7 +32,7 @@ ctypedef fused real_t:
     double
 
 cdef enum:
-    CHUNK = 256         # values tested before one branch on the result
+    CHUNK = 1024        # values tested before one branch on the result
 
 
 cpdef enum Bad:
@@ -54,6 +58,8 @@ cpdef enum Bad:
     BAD_PARENT_ORDER        # parent[i] < parent[i - 1]                 (path i)
     BAD_WEIGHT              # a throughput or contribution not finite   (path i)
     BAD_SLOT                # slot[i] outside [0, slots)                (path i)
+    BAD_LAYOUT              # packets.starts/counts changed             (sub-packet k)
+    BAD_SHAPE               # a packets array reshaped                  (0)
 
 
 cdef inline Py_ssize_t block_end(Py_ssize_t start, Py_ssize_t n) noexcept nogil:
@@ -64,25 +70,11 @@ cdef inline Py_ssize_t block_end(Py_ssize_t start, Py_ssize_t n) noexcept nogil:
 # a sorter's order and offsets
 # ---------------------------------------------------------------------------
 
-cdef Py_ssize_t large_packet(const int32_t *packets, Py_ssize_t n_big, int64_t j) noexcept nogil:
-    """The last p < n_big with packets[p] <= j (packets ascend from 0)."""
-    cdef Py_ssize_t lo = 0, hi = n_big, mid
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if packets[mid] <= j:
-            lo = mid
-        else:
-            hi = mid
-    return lo
-
-
-cdef int sort_kernel(const index_t *order, const index_t *offsets, Py_ssize_t n_sub,
-                     const int32_t *packets, Py_ssize_t n_big, int64_t n, int64_t max_packet,
+cdef int sort_kernel(const int32_t *order, const int32_t *offsets, Py_ssize_t n_sub,
+                     const int32_t *packets, Py_ssize_t n_big, int32_t n, int64_t max_packet,
                      uint8_t *seen, Py_ssize_t *where) noexcept nogil:
-    cdef Py_ssize_t k, i, k_big = 0
+    cdef Py_ssize_t k, k_big = 0
     cdef int64_t a, b
-    cdef index_t j, lo, hi
-    cdef int bad, inside
     if offsets[0] != 0:
         return BAD_OFFSETS_START
     if offsets[n_sub] != n:
@@ -96,29 +88,23 @@ cdef int sort_kernel(const index_t *order, const index_t *offsets, Py_ssize_t n_
             return BAD_OFFSETS_RANGE
         if b - a > max_packet:
             return BAD_PACKET_SIZE
-        if order[a] < 0 or order[a] >= n:
-            where[0] = a
-            return BAD_INDEX_RANGE
-        if not (packets[k_big] <= order[a] < packets[k_big + 1]):   # usually the same one
-            k_big = large_packet(packets, n_big, order[a])
-        lo, hi = packets[k_big], packets[k_big + 1]        # 0 <= lo <= order[a] < hi <= n
-        bad = 0
-        for i in range(a, b):       # in this large packet, and seen once (n: a spare slot)
-            j = order[i]
-            inside = (j >= lo) & (j < hi)
-            j = j if inside else <index_t> n
-            bad |= (not inside) | seen[j]
-            seen[j] = 1
-        if bad:
-            return sort_fault(order, a, b, lo, hi, n, seen, k, where)
+        if sub_packet_bad(order, a, b, packets, n_big, n, &k_big, seen):
+            return sort_fault(order, a, b, packets, n_big, n, seen, k, where)
     return 0
 
 
-cdef int sort_fault(const index_t *order, int64_t a, int64_t b, int64_t lo, int64_t hi,
-                    int64_t n, uint8_t *seen, Py_ssize_t k, Py_ssize_t *where) noexcept nogil:
+cdef int sort_fault(const int32_t *order, int64_t a, int64_t b, const int32_t *packets,
+                    Py_ssize_t n_big, int32_t n, uint8_t *seen, Py_ssize_t k,
+                    Py_ssize_t *where) noexcept nogil:
     """What is wrong in sub-packet k, known bad, and where.  Sub-packets before it are
     valid, so every ray of order[:b] is in range when the range test passed here."""
-    cdef int64_t i
+    cdef int64_t i, lo, hi
+    cdef Py_ssize_t k_big
+    if order[a] < 0 or order[a] >= n:
+        where[0] = a
+        return BAD_INDEX_RANGE
+    k_big = large_packet(packets, n_big, order[a])
+    lo, hi = packets[k_big], packets[k_big + 1]
     for i in range(a, b):
         if order[i] < lo or order[i] >= hi:
             where[0] = i
@@ -135,31 +121,21 @@ cdef int sort_fault(const index_t *order, int64_t a, int64_t b, int64_t lo, int6
     return BAD_INDEX_REPEAT     # not reached
 
 
-def sort_result(order, offsets, const int32_t[::1] packets, int64_t n, int64_t max_packet):
-    """A sorter's ``order``/``offsets`` (contiguous, both int32 or both int64) for ``n``
-    rays in the (valid) large packets ``packets``: a permutation of ``range(n)`` cut into
-    sub-packets of 1..max_packet rays, each inside one large packet.  The caller checks
+def sort_result(const int32_t[::1] order, const int32_t[::1] offsets,
+                const int32_t[::1] packets, int32_t n, int64_t max_packet):
+    """A sorter's ``order``/``offsets`` (contiguous int32) for ``n`` rays in the (valid)
+    large packets ``packets``: a permutation of ``range(n)`` cut into sub-packets of
+    1..max_packet rays, each inside one large packet.  The caller checks
     ``len(order) == n`` and ``len(offsets) >= 1``."""
     cdef Py_ssize_t where = 0
     cdef int code
-    cdef const int32_t[::1] order32, offsets32
-    cdef const int64_t[::1] order64, offsets64
     cdef uint8_t *seen = <uint8_t *> calloc(n + 1, 1)
     if seen == NULL:
         raise MemoryError()
     try:
-        if order.dtype == np.int32:
-            order32, offsets32 = order, offsets
-            with nogil:
-                code = sort_kernel(&order32[0] if n else NULL, &offsets32[0],
-                                   offsets32.shape[0] - 1, &packets[0], packets.shape[0] - 1,
-                                   n, max_packet, seen, &where)
-        else:
-            order64, offsets64 = order, offsets
-            with nogil:
-                code = sort_kernel(&order64[0] if n else NULL, &offsets64[0],
-                                   offsets64.shape[0] - 1, &packets[0], packets.shape[0] - 1,
-                                   n, max_packet, seen, &where)
+        with nogil:
+            code = sort_kernel(&order[0] if n else NULL, &offsets[0], offsets.shape[0] - 1,
+                               &packets[0], packets.shape[0] - 1, n, max_packet, seen, &where)
     finally:
         free(seen)
     return code, where
@@ -168,13 +144,6 @@ def sort_result(order, offsets, const int32_t[::1] packets, int64_t n, int64_t m
 # ---------------------------------------------------------------------------
 # a traversal's hits
 # ---------------------------------------------------------------------------
-
-cdef inline int closest_bad(int32_t p, float tmin, float t, float t0, float u, float v,
-                            uint32_t n_prim) noexcept nogil:
-    """prim is -1 or below n_prim; a hit lies in (tmin, t0) with finite u, v."""
-    return ((<uint32_t> (p + 1) > n_prim)
-            | ((p >= 0) & ((not (tmin < t)) | (not (t < t0)) | ((u - u) + (v - v) != 0))))
-
 
 cdef int lanes_kernel(const int32_t *prim, const float *tmin, const float *t, const float *t0,
                       const float *u, const float *v, Py_ssize_t capacity, uint32_t n_prim,
@@ -186,7 +155,7 @@ cdef int lanes_kernel(const int32_t *prim, const float *tmin, const float *t, co
         bad = 0
         if any_hit:             # a hit is any valid prim; t is the traversal's business
             for lane in range(a, b):
-                bad |= <uint32_t> (prim[lane] + 1) > n_prim
+                bad |= any_hit_bad(prim[lane], n_prim)
         else:
             for lane in range(a, b):
                 bad |= closest_bad(prim[lane], tmin[lane], t[lane], t0[lane], u[lane],
@@ -208,15 +177,22 @@ cdef int index_lanes_kernel(const int32_t *prim, const int32_t *index, const int
                             const int32_t *counts, Py_ssize_t n_sub, const int32_t *order,
                             const int32_t *offsets, Py_ssize_t capacity,
                             Py_ssize_t *where) noexcept nogil:
-    """Each lane of sub-packet k holds ``order[offsets[k] + j]``; other lanes hold no ray
-    (index and prim -1)."""
-    cdef Py_ssize_t k, j, s, c, end = 0, lane
+    """Sub-packet k still starts and ends where the gather put it (from ``offsets``: its
+    rays padded to a multiple of 4 lanes), each of its lanes holds
+    ``order[offsets[k] + j]``; other lanes hold no ray (index and prim -1)."""
+    cdef Py_ssize_t k, j, s, c, end = 0, lane, next_start = 0
     cdef const int32_t *lanes
     cdef const int32_t *rays
     cdef int bad
     for k in range(n_sub + 1):
-        s = starts[k] if k < n_sub else capacity
-        c = counts[k] if k < n_sub else 0
+        if k < n_sub:
+            s, c = next_start, offsets[k + 1] - offsets[k]
+            next_start = s + ((c + 3) & ~3)
+            if starts[k] != s or counts[k] != c or next_start > capacity:
+                where[0] = k
+                return BAD_LAYOUT
+        else:
+            s, c = capacity, 0
         bad = 0
         for lane in range(end, s):
             bad |= (index[lane] != -1) | (prim[lane] != -1)
@@ -227,9 +203,7 @@ cdef int index_lanes_kernel(const int32_t *prim, const int32_t *index, const int
                     return BAD_PADDING
         lanes = index + s
         rays = order + (offsets[k] if k < n_sub else 0)
-        for j in range(c):
-            bad |= lanes[j] != rays[j]
-        if bad:
+        if c and memcmp(lanes, rays, c * sizeof(int32_t)):    # short runs: libc's compare
             for j in range(c):
                 if lanes[j] != rays[j]:
                     where[0] = s + j
@@ -238,17 +212,25 @@ cdef int index_lanes_kernel(const int32_t *prim, const int32_t *index, const int
     return 0
 
 
-def hits(const float[:, ::1] rows, const float[::1] t0, const int32_t[::1] prim,
-         const float[::1] u, const float[::1] v, const int32_t[::1] index,
-         const int32_t[::1] starts, const int32_t[::1] counts, const int32_t[::1] order,
-         const int32_t[::1] offsets, int64_t n_prim, bint any_hit):
+def hits(const float[:, ::1] rows not None, const float[::1] t0 not None,
+         const int32_t[::1] prim not None, const float[::1] u not None,
+         const float[::1] v not None, const int32_t[::1] index not None,
+         const int32_t[::1] starts not None, const int32_t[::1] counts not None,
+         const int32_t[::1] order not None, const int32_t[::1] offsets not None,
+         int64_t n_prim, bint any_hit):
     """A traversal's hits in gathered packets, ``t0`` being the row ``t`` before it ran
     (the ray's tmax; -inf on an invalid ray).  Every lane still holds the ray the gather
     put there (``order[offsets[k]:offsets[k + 1]]`` in sub-packet k; other lanes index and
     prim -1), prim is -1 or a triangle index below ``n_prim``, and a closest hit has
     ``tmin < t < t0`` and finite u, v.  An any-hit query marks a hit by any valid prim."""
-    cdef Py_ssize_t where = 0, capacity = prim.shape[0]
+    cdef Py_ssize_t where = 0, capacity = rows.shape[1]
     cdef int code
+    if (rows.shape[0] != RS_PACKET_ROWS or prim.shape[0] != capacity
+            or u.shape[0] != capacity or v.shape[0] != capacity
+            or index.shape[0] != capacity or t0.shape[0] != capacity):
+        return BAD_SHAPE, 0
+    if starts.shape[0] != offsets.shape[0] - 1 or counts.shape[0] != starts.shape[0]:
+        return BAD_LAYOUT, 0
     with nogil:
         code = index_lanes_kernel(&prim[0], &index[0], &starts[0] if starts.shape[0] else NULL,
                                   &counts[0] if counts.shape[0] else NULL, starts.shape[0],
@@ -264,13 +246,6 @@ def hits(const float[:, ::1] rows, const float[::1] t0, const int32_t[::1] prim,
 # ---------------------------------------------------------------------------
 # rays made by a plugin
 # ---------------------------------------------------------------------------
-
-cdef inline int ray_bad(float ox, float oy, float oz, float dx, float dy, float dz, float tmin,
-                        float tmax) noexcept nogil:
-    """An active ray (tmin < tmax) needs tmin >= 0 and a finite origin and direction."""
-    cdef float acc = (ox - ox) + (oy - oy) + (oz - oz) + (dx - dx) + (dy - dy) + (dz - dz)
-    return (tmin < tmax) & ((not (tmin >= 0)) | (acc != 0))
-
 
 cdef int rays_kernel(const float *ox, const float *oy, const float *oz, const float *dx,
                      const float *dy, const float *dz, const float *tmin, const float *tmax,
@@ -351,14 +326,33 @@ def index_array(x, int64_t lo, int64_t hi, bint ascending):
     return code, where
 
 
+cdef inline int nonfinite32(const uint32_t *x, Py_ssize_t a, Py_ssize_t b) noexcept nogil:
+    """Any of the float32 values x[a:b] (as bits) infinite or NaN: all exponent bits set."""
+    cdef Py_ssize_t i
+    cdef int bad = 0
+    for i in range(a, b):
+        bad |= (x[i] & 0x7F800000u) == 0x7F800000u
+    return bad
+
+
+cdef inline int nonfinite64(const uint64_t *x, Py_ssize_t a, Py_ssize_t b) noexcept nogil:
+    """:func:`nonfinite32` for float64 bits."""
+    cdef Py_ssize_t i
+    cdef int bad = 0
+    for i in range(a, b):
+        bad |= (x[i] & 0x7FF0000000000000ull) == 0x7FF0000000000000ull
+    return bad
+
+
 cdef int finite_kernel(const real_t *x, Py_ssize_t n, Py_ssize_t *where) noexcept nogil:
     cdef Py_ssize_t a = 0, b, i
     cdef int bad
     while a < n:
         b = block_end(a, n)
-        bad = 0
-        for i in range(a, b):
-            bad |= (x[i] - x[i]) != 0
+        if real_t is float:
+            bad = nonfinite32(<const uint32_t *> x, a, b)
+        else:
+            bad = nonfinite64(<const uint64_t *> x, a, b)
         if bad:
             for i in range(a, b):
                 if (x[i] - x[i]) != 0:
@@ -395,13 +389,23 @@ cdef inline int row_ray_bad(const float *const *r, Py_ssize_t i) noexcept nogil:
                    r[RS_RAY_DY][i], r[RS_RAY_DZ][i], r[RS_RAY_TMIN][i], r[RS_RAY_TMAX][i])
 
 
-cdef inline int path_bad(const float *const *r, const int32_t *parent, const float *const *w,
-                         const int32_t *slot, Py_ssize_t i, uint32_t n,
-                         uint32_t slots) noexcept nogil:
-    cdef int bad = row_ray_bad(r, i)
-    bad |= <uint32_t> parent[i] >= n
-    bad |= (w[0][i] - w[0][i]) + (w[1][i] - w[1][i]) + (w[2][i] - w[2][i]) != 0
-    if slot != NULL:
+cdef inline int parents_bad(const int32_t *parent, Py_ssize_t a, Py_ssize_t b,
+                            uint32_t n) noexcept nogil:
+    """parent[a:b] in [0, n) and ascending (from parent[a - 1] when a > 0)."""
+    cdef Py_ssize_t i
+    cdef int bad = 0
+    for i in range(a, b):
+        bad |= <uint32_t> parent[i] >= n
+    for i in range(a if a else 1, b):
+        bad |= parent[i] < parent[i - 1]
+    return bad
+
+
+cdef inline int slots_bad(const int32_t *slot, Py_ssize_t a, Py_ssize_t b,
+                          uint32_t slots) noexcept nogil:
+    cdef Py_ssize_t i
+    cdef int bad = 0
+    for i in range(a, b):
         bad |= <uint32_t> slot[i] >= slots
     return bad
 
@@ -409,29 +413,32 @@ cdef inline int path_bad(const float *const *r, const int32_t *parent, const flo
 cdef int paths_kernel(const float *const *r, const int32_t *parent, const float *const *w,
                       const int32_t *slot, Py_ssize_t m, uint32_t n, uint32_t slots,
                       Py_ssize_t *where) noexcept nogil:
+    """Each part in its own loop over a block (which the compiler vectorises); a bad block
+    is searched again for its first bad path.  ``r`` or ``slot`` NULL: not checked."""
     cdef Py_ssize_t a = 0, b, i
-    cdef int bad
+    cdef int bad, c
     while a < m:
         b = block_end(a, m)
-        bad = 0
-        if slot == NULL:
+        bad = parents_bad(parent, a, b, n)
+        for c in range(3):
+            bad |= nonfinite32(<const uint32_t *> w[c], a, b)
+        if slot != NULL:
+            bad |= slots_bad(slot, a, b, slots)
+        if r != NULL:
             for i in range(a, b):
-                bad |= path_bad(r, parent, w, NULL, i, n, slots)
-        else:
-            for i in range(a, b):
-                bad |= path_bad(r, parent, w, slot, i, n, slots)
-        for i in range(a if a else 1, b):
-            bad |= parent[i] < parent[i - 1]
+                bad |= row_ray_bad(r, i)
         if bad:
             for i in range(a, b):
                 where[0] = i
-                if row_ray_bad(r, i):
+                if r != NULL and row_ray_bad(r, i):
                     return BAD_RAY if r[RS_RAY_TMIN][i] >= 0 else BAD_TMIN
                 if <uint32_t> parent[i] >= n:
                     return BAD_PARENT_RANGE
                 if i and parent[i] < parent[i - 1]:
                     return BAD_PARENT_ORDER
-                if path_bad(r, parent, w, NULL, i, n, slots):
+                if nonfinite32(<const uint32_t *> w[0], i, i + 1) \
+                        | nonfinite32(<const uint32_t *> w[1], i, i + 1) \
+                        | nonfinite32(<const uint32_t *> w[2], i, i + 1):
                     return BAD_WEIGHT
                 if slot != NULL and <uint32_t> slot[i] >= slots:
                     return BAD_SLOT
@@ -440,9 +447,10 @@ cdef int paths_kernel(const float *const *r, const int32_t *parent, const float 
 
 
 def paths(const float[:, ::1] data, Py_ssize_t m, const int32_t[::1] parent,
-          const float[:, :] weight, slot, int64_t n, int64_t slots):
+          const float[:, :] weight, slot, int64_t n, int64_t slots, bint with_rays=True):
     """``m`` rays that continue paths (a shader's next bounce, or its shadow rays) in one
-    pass: each ray finite or marked invalid (see :func:`rays`); ``parent`` ascending in
+    pass: each ray finite or marked invalid (see :func:`rays`; skipped without
+    ``with_rays``, when the gather checks them); ``parent`` ascending in
     ``[0, n)``; ``weight`` (3, m; rows contiguous) finite; ``slot`` (None, or int32)
     in ``[0, slots)``."""
     cdef Py_ssize_t where = 0
@@ -463,6 +471,70 @@ def paths(const float[:, ::1] data, Py_ssize_t m, const int32_t[::1] parent,
         slot32 = slot
         slot_ptr = &slot32[0]
     with nogil:
-        code = paths_kernel(r, &parent[0], w, slot_ptr, m, <uint32_t> n, <uint32_t> slots,
-                            &where)
+        code = paths_kernel(<const float *const *> r if with_rays else NULL, &parent[0], w,
+                            slot_ptr, m, <uint32_t> n, <uint32_t> slots, &where)
     return code, where
+
+
+# ---------------------------------------------------------------------------
+# a shader's Bounce of exactly the pipeline's types, without leaving C
+# ---------------------------------------------------------------------------
+
+cdef bint paths_ok(object rays, object parent, object slot, object weight, int64_t n,
+                   int64_t slots, bint with_rays, type batch_type):
+    """:func:`paths` of a RayBatch and arrays already of the pipeline's types (int32,
+    float32 (3, m) with contiguous rows), all valid; False for anything else."""
+    cdef const float[:, ::1] data
+    cdef const int32_t[::1] p
+    cdef const int32_t[::1] s
+    cdef const float[:, :] w
+    cdef Py_ssize_t m, where = 0
+    cdef const float *r[RS_RAY_ROWS]
+    cdef const float *wr[3]
+    cdef int c, code
+    if type(rays) is not batch_type or type(rays.n) is not int:
+        return False
+    try:
+        data, p, w = rays.data, parent, weight
+        if slot is not None:
+            s = slot
+    except (TypeError, ValueError):
+        return False
+    m = rays.n
+    if (data.shape[0] != RS_RAY_ROWS or not 0 <= m <= data.shape[1] or p.shape[0] != m
+            or w.shape[0] != 3 or w.shape[1] != m or (m and w.strides[1] != sizeof(float))
+            or (slot is not None and s.shape[0] != m)):
+        return False
+    if m == 0:
+        return True
+    for c in range(RS_RAY_ROWS):
+        r[c] = &data[c, 0]
+    for c in range(3):
+        wr[c] = &w[c, 0]
+    with nogil:
+        code = paths_kernel(<const float *const *> r if with_rays else NULL, &p[0], wr,
+                            &s[0] if slot is not None else NULL, m, <uint32_t> n,
+                            <uint32_t> slots, &where)
+    return code == 0
+
+
+def bounce_ok(bounce, int64_t n, int64_t slots, const double[:, ::1] radiance not None,
+              bint with_rays, type bounce_type, type shadow_type, type batch_type):
+    """True when a shader's ``bounce`` is exactly of the pipeline's types (``bounce_type``,
+    ``shadow_type``, ``batch_type``, int32 and float32 arrays) and keeps its contract
+    (see :func:`raysort.contract.check_bounce`), and ``radiance`` is finite: the common
+    case, checked without running Python.  False means: let ``check_bounce`` say."""
+    cdef Py_ssize_t where = 0
+    cdef int code
+    if type(bounce) is not bounce_type:
+        return False
+    with nogil:
+        code = finite_kernel(&radiance[0, 0], radiance.shape[0] * radiance.shape[1], &where) \
+            if radiance.shape[0] * radiance.shape[1] else 0
+    if code or not paths_ok(bounce.rays, bounce.parent, None, bounce.throughput, n, slots,
+                            with_rays, batch_type):
+        return False
+    shadow = bounce.shadow
+    return shadow is None or (type(shadow) is shadow_type and paths_ok(
+        shadow.rays, shadow.parent, shadow.slot, shadow.contribution, n, slots, with_rays,
+        batch_type))

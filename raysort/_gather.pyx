@@ -5,24 +5,54 @@ index order into a temporary 4-ray packet and written with 4-wide stores into
 16-byte aligned structure-of-arrays sub-packets, computing the inverse
 direction on the way (``rs_gather4`` in simd.h).
 """
-from libc.stdint cimport int32_t
+from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.math cimport INFINITY
-from raysort._types cimport (rs_gather4, rs_isa_name, rs_prefetch, RS_RAY_ROWS,
-                             RS_PACKET_ROWS, RS_PACKET_T)
+from libc.stdlib cimport calloc, free
+from libc.string cimport memcpy
+from raysort._checks cimport checked_ray, offsets_bad, packet_bounds
+from raysort._types cimport (rs_gather4, rs_isa_name, rs_prefetch, RS_MAX_PACKET,
+                             RS_RAY_ROWS, RS_PACKET_ROWS, RS_PACKET_TMIN, RS_PACKET_T)
 
 cdef enum:
     PREFETCH_AHEAD = 16     # rays (in the sorter's order) between a prefetch and its use
 
 
+def offsets_valid(const int32_t[::1] offsets, int32_t n):
+    """A sorter's ``offsets`` run from 0 to ``n`` in sub-packets of 1..RS_MAX_PACKET rays
+    (what :func:`gather` needs before the packets are allocated)."""
+    cdef int bad
+    if offsets.shape[0] < 1:
+        return False
+    with nogil:
+        bad = offsets_bad(&offsets[0], offsets.shape[0] - 1, n, RS_MAX_PACKET)
+    return not bad
+
+
 def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1] offsets,
            const int32_t[::1] starts, float[:, ::1] dst, int32_t[::1] prim, float[::1] u,
-           float[::1] v, int32_t[::1] index):
-    cdef int n_packets = starts.shape[0], k, j, lane, count, base, s, ahead
-    cdef int n_rays = offsets[n_packets] if n_packets else 0
+           float[::1] v, int32_t[::1] index, const int32_t[::1] packets, float[::1] t0=None,
+           bint check_order=True):
+    """Gather ``order[offsets[k]:offsets[k + 1]]`` into sub-packet k, checking the sorter's
+    order on the way (unless ``check_order`` is False, for a trusted sorter): each
+    sub-packet must hold rays of ``[0, n)`` from one large packet (``packets``: valid
+    boundaries ending at n), none twice.  ``offsets`` must be valid
+    (:func:`offsets_valid`), ``len(order) == n``, and ``starts``/``dst``/... sized for
+    them.  With ``t0``, the row ``t`` as gathered (each ray's tmax) is copied there.
+
+    Returns ``(order_ok, bad_ray)``: ``order_ok`` is False at the first sub-packet that
+    breaks the order contract (the gather stops there); ``bad_ray`` is a ray that breaks
+    the ray contract (active, yet tmin < 0 or not finite; stored inactive), or -1.
+    """
+    cdef Py_ssize_t n_packets = starts.shape[0], k, k_big = 0, j, count, base, s, ahead
+    cdef int32_t n = order.shape[0]
     cdef const float *src_rows[RS_RAY_ROWS]
     cdef float *dst_rows[RS_PACKET_ROWS]
     cdef int32_t idx[4]
-    cdef int c
+    cdef int c, lane, bad_lanes, order_bad = 0
+    cdef int32_t bad_ray = -1, lo = 0, hi = 0
+    cdef uint8_t *seen = <uint8_t *> calloc(n + 1, 1) if check_order else NULL
+    if check_order and seen == NULL:
+        raise MemoryError()
     for c in range(RS_RAY_ROWS):
         src_rows[c] = &src[c, 0]
     for c in range(RS_PACKET_ROWS):
@@ -31,39 +61,65 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
         for k in range(n_packets):
             base = offsets[k]
             count = offsets[k + 1] - base
+            if check_order and packet_bounds(order[base], &packets[0], packets.shape[0] - 1, n,
+                                             &k_big, &lo, &hi):
+                order_bad = 1
+                break
             for j in range(0, count, 4):
-                # the rows of rays further on, which the order makes random accesses
+                # the rows of rays further on, which the order makes random accesses (a
+                # prefetch of a ray not checked yet reads nothing)
                 for lane in range(4):
                     ahead = base + j + lane + PREFETCH_AHEAD
-                    if ahead < n_rays:
+                    if ahead < n and <uint32_t> order[ahead] < <uint32_t> n:
                         for c in range(RS_RAY_ROWS):
-                            rs_prefetch(&src[c, order[ahead]])
-                for lane in range(4):
-                    idx[lane] = order[base + j + lane] if j + lane < count else -1
+                            rs_prefetch(src_rows[c] + order[ahead])
+                for lane in range(4):   # a ray the order may not name reads nothing
+                    idx[lane] = -1 if j + lane >= count else (
+                        checked_ray(order[base + j + lane], lo, hi, n, seen, &order_bad)
+                        if check_order else order[base + j + lane])
                 s = starts[k] + j
-                rs_gather4(dst_rows, &prim[0], &u[0], &v[0], s, src_rows, idx)
+                bad_lanes = rs_gather4(dst_rows, &prim[0], &u[0], &v[0], s, src_rows, idx)
+                if bad_lanes and bad_ray < 0:
+                    for lane in range(3, -1, -1):
+                        if bad_lanes & (1 << lane):
+                            bad_ray = idx[lane]
                 for lane in range(4):
                     index[s + lane] = idx[lane]
-        # lanes after the last sub-packet (an empty batch still has 4 lanes)
-        s = starts[n_packets - 1] + ((offsets[n_packets] - offsets[n_packets - 1] + 3) & ~3) \
-            if n_packets else 0
-        for j in range(s, dst.shape[1], 4):
-            for lane in range(4):
-                idx[lane] = -1
-            rs_gather4(dst_rows, &prim[0], &u[0], &v[0], j, src_rows, idx)
-            for lane in range(4):
-                index[j + lane] = -1
+            if order_bad:
+                break
+        if not order_bad:
+            # lanes after the last sub-packet (an empty batch still has 4 lanes)
+            s = starts[n_packets - 1] + ((offsets[n_packets] - offsets[n_packets - 1] + 3) & ~3) \
+                if n_packets else 0
+            for j in range(s, dst.shape[1], 4):
+                for lane in range(4):
+                    idx[lane] = -1
+                rs_gather4(dst_rows, &prim[0], &u[0], &v[0], j, src_rows, idx)
+                for lane in range(4):
+                    index[j + lane] = -1
+            if t0 is not None:
+                memcpy(&t0[0], &dst[RS_PACKET_T, 0], dst.shape[1] * sizeof(float))
+    free(seen)
+    return not order_bad, bad_ray
 
 
 def scatter(const float[:, ::1] rows, const int32_t[::1] prim, const float[::1] u,
             const float[::1] v, const int32_t[::1] index, float[::1] t_out,
             int32_t[::1] prim_out, float[::1] u_out, float[::1] v_out):
-    cdef int s, i
+    """Every lane's hit to its ray ``index[lane]`` (-1: none); False, with nothing more
+    written, at a lane whose index is beyond the outputs."""
+    cdef Py_ssize_t s
+    cdef int32_t i
+    cdef uint32_t n = t_out.shape[0]
+    cdef bint ok = True
     with nogil:
         for s in range(index.shape[0]):
             i = index[s]
             if i < 0:
                 continue
+            if <uint32_t> i >= n:
+                ok = False
+                break
             if prim[s] >= 0:
                 t_out[i] = rows[RS_PACKET_T, s]
                 prim_out[i] = prim[s]
@@ -74,14 +130,22 @@ def scatter(const float[:, ::1] rows, const int32_t[::1] prim, const float[::1] 
                 prim_out[i] = -1
                 u_out[i] = 0
                 v_out[i] = 0
+    return ok
 
 
 def scatter_occluded(const int32_t[::1] prim, const int32_t[::1] index, unsigned char[::1] out):
-    cdef int s
+    """``out[index[lane]]``: the lane found a hit; False at an index beyond ``out``."""
+    cdef Py_ssize_t s
+    cdef uint32_t n = out.shape[0]
+    cdef bint ok = True
     with nogil:
         for s in range(index.shape[0]):
             if index[s] >= 0:
+                if <uint32_t> index[s] >= n:
+                    ok = False
+                    break
                 out[index[s]] = prim[s] >= 0
+    return ok
 
 
 def add_unoccluded(double[:, ::1] radiance, const int32_t[::1] slot,

@@ -118,7 +118,7 @@ cdef extern from "raysort/simd.h" nogil:
     float RS_BOX_SLACK
     int rs_tri1(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
     int rs_tri4(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
-    void rs_gather4(float *const dst[RS_PACKET_ROWS], int32_t *prim, float *u, float *v, int j,
+    int rs_gather4(float *const dst[RS_PACKET_ROWS], int32_t *prim, float *u, float *v, int j,
                     const float *const src[RS_RAY_ROWS], const int32_t idx[4])
 
 

@@ -9,7 +9,8 @@ Two kinds of input cross into raysort's C code:
   :class:`~raysort.errors.PluginContractError` naming the plugin, its
   distribution and what was wrong.  So does a plugin method that raises.
 
-Each check reads its arrays once, in Cython (:mod:`raysort._contract`).  The
+Each check reads its arrays once, in Cython (:mod:`raysort._contract`, built for
+every ISA like the kernels).  The
 pipeline runs the plugin checks on every plugin from outside raysort; raysort's
 own plugins that declare ``trusted = True`` skip them when
 ``Pipeline(check_plugins=False)``.  Plugin authors can run the same checks in
@@ -18,21 +19,28 @@ their tests (they are in :mod:`raysort.sdk`).
 from __future__ import annotations
 
 import numbers
+import operator
 from dataclasses import fields
 
 import numpy as np
 
-from raysort import _contract
+from raysort import _contract, isa
 from raysort.errors import ConfigError, PluginContractError, PluginError
 from raysort.paths import Bounce, ShadowRays
 from raysort.rays import (MAX_PACKET, MAX_RAYS, PACKET_ROWS, RAY_ROWS, PacketRow, RayBatch,
                           RayRow)
 from raysort.stats import Counters
 
-__all__ = ["check_packets", "check_ray_batch", "check_sort", "check_hits", "check_counters",
-           "check_generated", "check_bounce", "call_plugin", "before_traversal", "plugin_error"]
+__all__ = ["check_packets", "check_ray_batch", "sort_arrays", "check_sort", "check_hits",
+           "check_packet_arrays", "packet_arrays", "check_rays", "check_counters", "check_generated",
+           "check_bounce", "call_plugin", "before_traversal", "plugin_error"]
 
 _BAD = _contract.Bad
+
+
+def _kernels():
+    """The check kernels built for the active ISA (:mod:`raysort._contract`)."""
+    return isa.module("_contract")
 _TMIN, _ORIGIN, _DIRECTION = RayRow.tmin, RayRow.ox, RayRow.dx     # three rows each
 _LANE_TMIN, _LANE_T = PacketRow.tmin, PacketRow.t
 _PACKET_ARRAYS = ("rows", "prim", "u", "v", "index", "starts", "counts")
@@ -113,7 +121,7 @@ def _index_array(value, label, fail, *, length=None):
 
 
 def _finite(arr, label, fail):
-    code, where = _contract.finite(arr.reshape(-1))
+    code, where = _kernels().finite(arr.reshape(-1))
     if code:
         index = ", ".join(str(int(i)) for i in np.unravel_index(where, arr.shape))
         fail(f"{label}[{index}] is {arr.reshape(-1)[where]} (values must be finite)")
@@ -136,7 +144,7 @@ def _batch_layout(rays, label, fail):
 
 def _rays(rays, label, fail):
     """Every ray finite or marked invalid (``not tmin < tmax``)."""
-    code, i = _contract.rays(rays.data, len(rays))
+    code, i = _kernels().rays(rays.data, len(rays))
     if code == _BAD.BAD_TMIN:
         fail(f"{label} ray {i} has tmin = {rays.data[_TMIN, i]} < 0 (mark an unused ray "
              f"invalid with tmin >= tmax)")
@@ -178,7 +186,7 @@ def check_packets(packets, n):
     if len(arr) == 0 or arr[0] != 0 or arr[-1] != n:
         raise ConfigError(f"packets (large-packet boundaries) must start at 0 and end at {n}, "
                           f"the number of rays; got {arr.tolist() if len(arr) < 8 else arr}")
-    code, i = _contract.index_array(arr, 0, n + 1, True)
+    code, i = _kernels().index_array(arr, 0, n + 1, True)
     if code:
         raise ConfigError(f"packets must not decrease, got {arr[i - 1]} then {arr[i]} at "
                           f"position {i}")
@@ -195,14 +203,10 @@ def _failer(kind, plugin):
     return fail
 
 
-def check_sort(plugin, result, n, packets):
-    """Validate a sorter's ``(order, offsets)`` for ``n`` rays; returns them as int32 arrays.
-
-    ``plugin`` is the sorter or its name.  ``order`` must be a permutation of
-    ``range(n)``; ``offsets`` must start at 0, increase strictly and end at
-    ``n``; each sub-packet holds at most 4096 rays, all from one large packet
-    (``packets``: valid boundaries, see :func:`check_packets`).
-    """
+def sort_arrays(plugin, result, n):
+    """A sorter's ``(order, offsets)`` for ``n`` rays as contiguous int32 arrays, checking
+    what is not a matter of their values (the tuple, integer types, ``len(order) == n``,
+    an offset at all, every value within int32); :func:`check_sort` checks the rest."""
     fail = _failer("sorters", plugin)
     if not (isinstance(result, tuple) and len(result) == 2):
         fail(f"sort() must return (order, offsets), got {type(result).__name__}")
@@ -212,10 +216,35 @@ def check_sort(plugin, result, n, packets):
         fail(f"order has {len(order)} entries for {n} rays")
     if len(offsets) < 1:
         fail(f"offsets must run from 0 to {n}, got an empty array")
-    if order.dtype != offsets.dtype:
-        order, offsets = order.astype(np.int64), offsets.astype(np.int64)
+    if order.dtype != np.int32:
+        code, where = _kernels().index_array(order, 0, n, False)
+        if code:
+            fail(f"order is not a permutation of the batch: order[{where}] = {order[where]} "
+                 f"is out of range 0..{n - 1}")
+        order = order.astype(np.int32)
+    if offsets.dtype != np.int32:
+        code, where = _kernels().index_array(offsets, 0, n + 1, False)
+        if code:
+            fail(f"offsets must run from 0 to {n}, got {offsets[0]}..{offsets[-1]} with "
+                 f"{offsets[where]} at position {where}")
+        offsets = offsets.astype(np.int32)
+    return order, offsets
+
+
+def check_sort(plugin, result, n, packets):
+    """Validate a sorter's ``(order, offsets)`` for ``n`` rays; returns them as int32 arrays.
+
+    ``plugin`` is the sorter or its name.  ``order`` must be a permutation of
+    ``range(n)``; ``offsets`` must start at 0, increase strictly and end at
+    ``n``; each sub-packet holds at most 4096 rays, all from one large packet
+    (``packets``: valid boundaries, see :func:`check_packets`).  (The pipeline
+    runs these checks inside its gather, :func:`raysort.rays.gather_checked`,
+    and this function only to say what is wrong.)
+    """
+    fail = _failer("sorters", plugin)
+    order, offsets = sort_arrays(plugin, result, n)
     packets = np.ascontiguousarray(packets, dtype=np.int32)
-    code, where = _contract.sort_result(order, offsets, packets, n, MAX_PACKET)
+    code, where = _kernels().sort_result(order, offsets, packets, n, MAX_PACKET)
     if code in (_BAD.BAD_OFFSETS_START, _BAD.BAD_OFFSETS_END, _BAD.BAD_OFFSETS_RANGE):
         fail(f"offsets must run from 0 to {n}, got {offsets[0]}..{offsets[-1]}"
              + (f" with {offsets[where + 1]} at position {where + 1}"
@@ -234,14 +263,19 @@ def check_sort(plugin, result, n, packets):
              f"(again at order[{where}])")
     if code == _BAD.BAD_MIXED:
         fail(f"sub-packet {where} mixes rays of different large packets")
-    return order.astype(np.int32, copy=False), offsets.astype(np.int32, copy=False)
+    return order, offsets
 
 
 def before_traversal(packets):
     """What :func:`check_hits` compares with: take it after the gather, before the
     traversal runs (the arrays, and a copy of the row ``t``, which holds each ray's tmax)."""
-    return (tuple(getattr(packets, name) for name in _PACKET_ARRAYS),
-            packets.rows[_LANE_T].copy())
+    return packet_arrays(packets), packets.rows[_LANE_T].copy()
+
+
+def packet_arrays(packets):
+    """The arrays of ``packets`` that :func:`check_packet_arrays` compares with."""
+    p = packets
+    return p.rows, p.prim, p.u, p.v, p.index, p.starts, p.counts      # _PACKET_ARRAYS
 
 
 def check_hits(plugin, packets, before, order, offsets, n_prim, any_hit):
@@ -255,14 +289,15 @@ def check_hits(plugin, packets, before, order, offsets, n_prim, any_hit):
     """
     fail = _failer("traversals", plugin)
     arrays, t0 = before
-    for name, array in zip(_PACKET_ARRAYS, arrays):
-        if getattr(packets, name, None) is not array:
-            fail(f"intersect() replaced packets.{name}; write into the arrays instead")
-    if any(a.shape != s or a.dtype != d for a, (s, d) in zip(arrays, _packet_shapes(packets))):
-        fail("intersect() reshaped or retyped an array of the packets")
+    check_packet_arrays(plugin, packets, arrays)
     rows, prim, u, v, index, starts, counts = arrays
-    code, lane = _contract.hits(rows, t0, prim, u, v, index, starts, counts, order, offsets,
+    code, lane = _kernels().hits(rows, t0, prim, u, v, index, starts, counts, order, offsets,
                                 n_prim, any_hit)
+    if code == _BAD.BAD_SHAPE:
+        fail("intersect() reshaped or retyped an array of the packets")
+    if code == _BAD.BAD_LAYOUT:
+        fail(f"intersect() changed packets.starts or packets.counts (sub-packet {lane}); "
+             f"they say where the gather put each sub-packet")
     if code == _BAD.BAD_PADDING:
         fail(f"it wrote into padding lane {lane}, which holds no ray")
     if code == _BAD.BAD_LANE_INDEX:
@@ -277,6 +312,17 @@ def check_hits(plugin, packets, before, order, offsets, n_prim, any_hit):
         fail(f"lane {lane}: a hit with u = {u[lane]}, v = {v[lane]} (must be finite)")
 
 
+def check_packet_arrays(plugin, packets, arrays):
+    """A traversal left ``packets`` holding the ``arrays`` it was given
+    (:func:`packet_arrays`), unchanged in shape and type."""
+    fail = _failer("traversals", plugin)
+    for name, array in zip(_PACKET_ARRAYS, arrays):
+        if getattr(packets, name, None) is not array:
+            fail(f"intersect() replaced packets.{name}; write into the arrays instead")
+    if any(a.shape != s or a.dtype != d for a, (s, d) in zip(arrays, _packet_shapes(packets))):
+        fail("intersect() reshaped or retyped an array of the packets")
+
+
 def _packet_shapes(packets):
     """(shape, dtype) of each array of freshly gathered ``packets``."""
     capacity = packets.rows.shape[1]
@@ -285,35 +331,49 @@ def _packet_shapes(packets):
             ((packets.n_packets,), np.int32), ((packets.n_packets,), np.int32))
 
 
+_COUNTER_VALUES = operator.attrgetter(*_COUNTER_FIELDS)
+
+
 def check_counters(plugin, counters):
     """A traversal's :class:`Counters`: whole numbers >= 0 and a bool ``available``."""
+    if type(counters) is Counters and type(counters.available) is bool:
+        values = _COUNTER_VALUES(counters)
+        if set(map(type, values)) == {int} and min(values) >= 0:
+            return counters                          # the common case, in a few C loops
     fail = _failer("traversals", plugin)
     if not isinstance(counters, Counters):
         fail(f"intersect() must return raysort.stats.Counters, got {type(counters).__name__}")
     for name in _COUNTER_FIELDS:
         value = getattr(counters, name)
-        if type(value) is not int and (isinstance(value, bool)        # the common case first
-                                       or not isinstance(value, numbers.Integral)):
-            fail(f"Counters.{name} must be a whole number >= 0, got {value!r}")
-        if value < 0:
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 0:
             fail(f"Counters.{name} must be a whole number >= 0, got {value!r}")
     if not isinstance(counters.available, bool):
         fail(f"Counters.available must be True or False, got {counters.available!r}")
     return counters
 
 
-def check_generated(plugin, rays, n):
+def check_generated(plugin, rays, n, *, with_rays=True):
     """A generator's result: a :class:`RayBatch` of ``n`` rays, each finite or
-    marked invalid."""
+    marked invalid (``with_rays=False`` leaves that to the caller, as for
+    :func:`check_bounce`)."""
     fail = _failer("generators", plugin)
     _batch_layout(rays, "generate() result", fail)
     if len(rays) != n:
         fail(f"generate() must return {n} rays (pixels x samples), got {len(rays)}")
-    _rays(rays, "generate() result", fail)
+    if with_rays:
+        _rays(rays, "generate() result", fail)
     return rays
 
 
-def check_bounce(plugin, bounce, n, slots, radiance):
+def check_rays(kind, plugin, rays, label):
+    """Rays a plugin of ``kind`` made (``label`` says which): each finite or marked invalid
+    (``not tmin < tmax``), with ``tmin >= 0``.  :func:`check_generated` and
+    :func:`check_bounce` include it; the pipeline runs it inside its gather and this
+    function only to say what is wrong."""
+    _rays(rays, label, _failer(kind, plugin))
+
+
+def check_bounce(plugin, bounce, n, slots, radiance, *, with_rays=True):
     """A shader's :class:`Bounce` for ``n`` shaded rays whose paths add to
     ``radiance`` rows ``0..slots-1``; returns it with arrays of the pipeline's types.
 
@@ -322,12 +382,17 @@ def check_bounce(plugin, bounce, n, slots, radiance):
     rays' ``slot`` lie in ``0..slots-1``; ``radiance`` is still finite.  Each part
     is checked in one pass.
     """
+    if (type(radiance) is np.ndarray and radiance.ndim == 2 and radiance.dtype == np.float64
+            and radiance.flags.c_contiguous
+            and _kernels().bounce_ok(bounce, n, slots, radiance, with_rays, Bounce, ShadowRays,
+                                     RayBatch)):
+        return bounce           # the pipeline's own types, valid: checked in one C call
     fail = _failer("shaders", plugin)
     _finite(radiance, "radiance", fail)
     if not isinstance(bounce, Bounce):
         fail(f"shade() must return raysort.paths.Bounce, got {type(bounce).__name__}")
     parent, _, throughput = _paths(bounce.rays, bounce.parent, None, bounce.throughput, n,
-                                   slots, "Bounce", "throughput", fail)
+                                   slots, "Bounce", "throughput", fail, with_rays)
     shadow = bounce.shadow
     if shadow is not None:
         if not isinstance(shadow, ShadowRays):
@@ -335,11 +400,11 @@ def check_bounce(plugin, bounce, n, slots, radiance):
                  f"{type(shadow).__name__}")
         shadow = ShadowRays(shadow.rays, *_paths(shadow.rays, shadow.parent, shadow.slot,
                                                  shadow.contribution, n, slots, "ShadowRays",
-                                                 "contribution", fail))
+                                                 "contribution", fail, with_rays))
     return Bounce(bounce.rays, parent, throughput, shadow)
 
 
-def _paths(rays, parent, slot, weight, n, slots, label, weight_name, fail):
+def _paths(rays, parent, slot, weight, n, slots, label, weight_name, fail, with_rays):
     """Rays continuing paths, their parents (ascending in 0..n-1), slots (0..slots-1 or
     None) and (3, m) weights, in one pass; returns (parent, slot, weight) as int32 and
     float32 arrays."""
@@ -348,7 +413,7 @@ def _paths(rays, parent, slot, weight, n, slots, label, weight_name, fail):
     parent = _int32(parent, f"{label}.parent", m, fail)
     slot = None if slot is None else _int32(slot, f"{label}.slot", m, fail)
     weight = _weights(weight, f"{label}.{weight_name}", m, fail)
-    code, i = _contract.paths(rays.data, m, parent, weight, slot, n, slots)
+    code, i = _kernels().paths(rays.data, m, parent, weight, slot, n, slots, with_rays)
     if code in (_BAD.BAD_TMIN, _BAD.BAD_RAY):
         _rays(rays, f"{label}.rays", fail)
     if code == _BAD.BAD_PARENT_RANGE:
@@ -364,9 +429,15 @@ def _paths(rays, parent, slot, weight, n, slots, label, weight_name, fail):
     return parent, slot, weight
 
 
+_INT32, _FLOAT32 = np.dtype(np.int32), np.dtype(np.float32)
+
+
 def _int32(value, label, length, fail):
     """A 1-d integer array of ``length`` entries as contiguous int32 (a value that does
     not fit is out of every range the pipeline uses, and said so)."""
+    if (type(value) is np.ndarray and value.dtype is _INT32 and value.shape == (length,)
+            and value.flags.c_contiguous):
+        return value                                # what built-in shaders return
     arr = _index_array(value, label, fail, length=length)
     if arr.dtype != np.int32:
         bad = np.flatnonzero((arr < np.iinfo(np.int32).min) | (arr > np.iinfo(np.int32).max))
@@ -379,6 +450,9 @@ def _int32(value, label, length, fail):
 def _weights(value, label, m, fail):
     """A float (3, m) array as float32 with contiguous rows (lambert's slices need no copy);
     a value beyond float32 becomes inf and fails the finiteness check."""
+    if (type(value) is np.ndarray and value.dtype is _FLOAT32 and value.shape == (3, m)
+            and value.strides[1] == 4):
+        return value                                # what built-in shaders return
     try:
         arr = np.asarray(value)
     except (TypeError, ValueError) as exc:

@@ -23,6 +23,7 @@ How a render is organised (and why it is deterministic):
 from __future__ import annotations
 
 import inspect
+import operator
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor, as_completed
@@ -36,8 +37,8 @@ from raysort.errors import ConfigError
 from raysort.params import boolean, integer
 from raysort.paths import Paths
 from raysort.progress import with_rays
-from raysort.rays import (MAX_RAYS, Hits, RayBatch, add_unoccluded, gather, scatter,
-                          scatter_occluded)
+from raysort.rays import (MAX_RAYS, Hits, RayBatch, add_unoccluded, gather_checked, scatter,
+                          scatter_checked, scatter_occluded)
 from raysort.scene import Scene, load_scene
 from raysort.stats import Counters
 
@@ -317,28 +318,54 @@ class Pipeline:
         if packets is None:
             packets = np.append(np.arange(0, n, self.tile * self.tile), n)
         packets = contract.check_packets(packets, n)
+        return self._trace(rays, packets, any_hit, timings, threads)
+
+    def _trace(self, rays, packets, any_hit, timings, threads, maker=None):
+        """:meth:`trace` of checked arguments.  ``maker``, ``(kind, plugin, label)``,
+        names the plugin whose rays these are, which the ray contract then binds; a
+        caller's rays may be anything (a ray that is not finite is invalid).
+
+        The checks of the sorter's result, the rays and the traversal's hits run inside
+        the gather and the scatter, which read those arrays anyway;
+        :mod:`raysort.contract` is called only to say what is wrong."""
+        n = len(rays)
         clock = _Clock(timings)
         if n == 0:
             return (np.zeros(0, bool) if any_hit else Hits(0)), Counters()
         result = contract.call_plugin("sorters", self.sorter, "sort", rays, packets.copy(),
                                       self.bvh.bounds.copy())
         clock.lap("sort")
-        if self._checked(self.sorter):
-            order, offsets = contract.check_sort(self.sorter, result, n, packets)
-            clock.lap("check")
-        else:
-            order, offsets = result
-        batch = gather(rays, order, offsets)
+        check_sort = self._checked(self.sorter)
+        order, offsets = contract.sort_arrays(self.sorter, result, n) if check_sort else result
+        clock.lap("check")
+        check_hits = self._checked(self.traversal)
+        batch, tmax, bad_ray = gather_checked(rays, order, offsets, packets,
+                                              keep_tmax=check_hits and not any_hit,
+                                              check_order=check_sort)
         clock.lap("gather")
-        before = contract.before_traversal(batch) if self._checked(self.traversal) else None
+        if batch is None:
+            contract.check_sort(self.sorter, result, n, packets)
+            raise AssertionError("the gather rejected a sort result that check_sort passes")
+        if bad_ray >= 0 and maker is not None and self._checked(maker[1]):
+            kind, plugin, label = maker
+            contract.check_rays(kind, plugin, rays, label)
+            raise AssertionError(f"the gather rejected ray {bad_ray}, which check_rays passes")
+        arrays = contract.packet_arrays(batch) if check_hits else None
         counters = self._intersect(batch, any_hit, threads, timings)
         clock.lap("traverse")
-        if self._checked(self.traversal):
-            contract.check_hits(self.traversal, batch, before, order, offsets,
-                                len(self.bvh.faces), any_hit)
-            clock.lap("check")
-        out = scatter_occluded(batch, n) if any_hit else scatter(batch, n)
+        if not check_hits:
+            out = scatter_occluded(batch, n) if any_hit else scatter(batch, n)
+            clock.lap("scatter")
+            return out, counters
+        if not all(map(operator.is_, contract.packet_arrays(batch), arrays)):
+            contract.check_packet_arrays(self.traversal, batch, arrays)     # names it
+        clock.lap("check")
+        out = scatter_checked(batch, order, offsets, tmax, len(self.bvh.faces), any_hit)
         clock.lap("scatter")
+        if out is None:
+            contract.check_hits(self.traversal, batch, (arrays, batch.t if any_hit else tmax),
+                                order, offsets, len(self.bvh.faces), any_hit)
+            raise AssertionError("the scatter rejected hits that check_hits passes")
         return out, counters
 
     def _intersect(self, batch, any_hit, threads=1, timings=None):
@@ -467,14 +494,15 @@ class Pipeline:
                                         height, spp, seed)
             clock.lap("generate")
             if self._checked(self.generator):
-                contract.check_generated(self.generator, rays, n_pix * len(samples))
+                contract.check_generated(self.generator, rays, n_pix * len(samples),
+                                         with_rays=False)     # the gather checks them
                 clock.lap("check")
             paths = Paths(np.tile(pixels, len(samples)), np.repeat(samples, n_pix),
                           np.tile(slots, len(samples)))
             packets = np.arange(0, len(rays) + 1, n_pix, dtype=np.int32)
-            depth = 0
+            depth, maker = 0, ("generators", self.generator, "generate() result")
             while len(rays):
-                hits, counters = self.trace(rays, packets, timings=stats.stage_seconds, threads=1)
+                hits, counters = self._trace(rays, packets, False, stats.stage_seconds, 1, maker)
                 stats.rays[depth] = stats.rays.get(depth, 0) + len(rays)
                 stats.counters[depth] = stats.counters.get(depth, Counters()) + counters
                 if tap is not None:
@@ -485,14 +513,14 @@ class Pipeline:
                 clock.lap("shade")
                 if self._checked(self.shader):
                     bounce = contract.check_bounce(self.shader, bounce, len(rays), n_pix,
-                                                   radiance)
+                                                   radiance, with_rays=False)  # the gather
                     clock.lap("check")
                 if bounce.shadow is not None and len(bounce.shadow.rays):
                     self._trace_shadows(bounce.shadow, packets, radiance, stats, tap, tile,
                                         depth)
                 packets = np.searchsorted(bounce.parent, packets).astype(np.int32)
                 paths = paths.take(bounce.parent, bounce.throughput)
-                rays = bounce.rays
+                rays, maker = bounce.rays, ("shaders", self.shader, "Bounce.rays")
                 if rays.prev_t is None:     # each path's last hit distance, for sorters
                     rays.prev_t = hits.t[bounce.parent]
                 depth += 1
@@ -503,8 +531,8 @@ class Pipeline:
 
     def _trace_shadows(self, shadow, packets, radiance, stats, tap=None, tile=None, depth=0):
         boundaries = np.searchsorted(shadow.parent, packets).astype(np.int32)
-        occluded, counters = self.trace(shadow.rays, boundaries, any_hit=True,
-                                        timings=stats.stage_seconds, threads=1)
+        occluded, counters = self._trace(shadow.rays, boundaries, True, stats.stage_seconds, 1,
+                                         ("shaders", self.shader, "ShadowRays.rays"))
         if tap is not None:
             tap(Traced(tile, depth, True, shadow.rays, boundaries, occluded))
         stats.shadow_rays += len(shadow.rays)

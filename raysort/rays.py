@@ -282,29 +282,81 @@ def gather(rays, order, offsets):
 
     Sub-packet k holds the rays ``order[offsets[k]:offsets[k + 1]]``.  The
     copy runs four rays at a time with SIMD stores and computes the inverse
-    directions; the sorter's output must already be validated.
+    directions.  ``order`` must be a permutation of the batch and ``offsets``
+    run from 0 to ``len(rays)`` in sub-packets of 1..``MAX_PACKET`` rays
+    (checked on the way; ValueError otherwise).
     """
-    counts = np.diff(np.asarray(offsets, dtype=np.int32))
-    packets = Packets(counts)
-    isa.module("_gather").gather(rays.data, np.ascontiguousarray(order, dtype=np.int32),
-                   np.ascontiguousarray(offsets, dtype=np.int32), packets.starts,
-                   packets.rows, packets.prim, packets.u, packets.v, packets.index)
+    n = len(rays)
+    order = np.ascontiguousarray(order, dtype=np.int32)
+    offsets = np.ascontiguousarray(offsets, dtype=np.int32)
+    packets, _, bad_ray = gather_checked(rays, order, offsets, np.array([0, n], np.int32))
+    if packets is None:
+        raise ValueError(f"gather: order must be a permutation of the {n} rays and offsets "
+                         f"run from 0 to {n} in sub-packets of 1..{MAX_PACKET} rays "
+                         f"(raysort.contract.check_sort says what is wrong)")
     return packets
+
+
+def gather_checked(rays, order, offsets, packets, keep_tmax=False, check_order=True):
+    """:func:`gather` checking a sorter's result against the large packets ``packets``
+    (unless ``check_order`` is False: a trusted sorter's) and the rays against the ray
+    contract on the way, for the pipeline.
+
+    ``order`` and ``offsets`` are int32 arrays with ``len(order) == len(rays)``;
+    ``packets`` valid boundaries.  Returns ``(Packets, tmax, bad_ray)``:
+    ``(None, None, -1)`` if the order or offsets break their contract
+    (:func:`raysort.contract.check_sort` says how); ``tmax`` (with ``keep_tmax``;
+    otherwise None) each lane's t as gathered, which :func:`scatter_checked` needs
+    for closest hits; ``bad_ray`` a ray
+    that is active yet not finite or with tmin < 0 (traced as invalid), or -1.
+    """
+    kernels = isa.module("_gather")
+    if len(order) != len(rays) or not kernels.offsets_valid(offsets, len(rays)):
+        return None, None, -1
+    batch = Packets(np.diff(offsets))
+    tmax = np.empty(batch.capacity, np.float32) if keep_tmax else None
+    order_ok, bad_ray = kernels.gather(rays.data, order, offsets, batch.starts, batch.rows,
+                                       batch.prim, batch.u, batch.v, batch.index, packets,
+                                       tmax, check_order)
+    return (batch, tmax, bad_ray) if order_ok else (None, None, -1)
 
 
 def scatter(packets, n, hits=None):
     """Copy the closest hits of ``packets`` back to batch order (a new or given :class:`Hits`)."""
     hits = Hits(n) if hits is None else hits
-    isa.module("_gather").scatter(packets.rows, packets.prim, packets.u, packets.v, packets.index,
-                    hits.t, hits.prim, hits.u, hits.v)
+    if not isa.module("_gather").scatter(packets.rows, packets.prim, packets.u, packets.v,
+                                         packets.index, hits.t, hits.prim, hits.u, hits.v):
+        raise ValueError(f"scatter: packets.index holds a ray beyond the {len(hits)} hits")
     return hits
 
 
 def scatter_occluded(packets, n):
     """For an any-hit query: a bool array, True where the ray found any hit."""
     occluded = np.zeros(n, dtype=np.uint8)
-    isa.module("_gather").scatter_occluded(packets.prim, packets.index, occluded)
+    if not isa.module("_gather").scatter_occluded(packets.prim, packets.index, occluded):
+        raise ValueError(f"scatter_occluded: packets.index holds a ray beyond the {n} rays")
     return occluded.view(bool)
+
+
+def scatter_checked(packets, order, offsets, tmax, n_prim, any_hit):
+    """Check the hits a traversal wrote into :func:`gather_checked`'s ``packets`` (the
+    rules of :func:`raysort.contract.check_hits`, but for the arrays being the ones
+    gathered) and scatter them.  Returns the :class:`Hits` (or, with ``any_hit``, the
+    bool array of occluded rays), or None when the traversal broke its contract.
+    ``tmax`` may be None for an any-hit query.
+
+    The check is a separate pass before the scatter: over lanes, in order, it
+    vectorises, which the scatter's writes in ray order do not."""
+    try:
+        code, _ = isa.module("_contract").hits(
+            packets.rows, packets.t if tmax is None else tmax, packets.prim, packets.u,
+            packets.v, packets.index, packets.starts, packets.counts, order, offsets, n_prim,
+            any_hit)
+    except (TypeError, ValueError):         # an array retyped in place
+        return None
+    if code:
+        return None
+    return scatter_occluded(packets, len(order)) if any_hit else scatter(packets, len(order))
 
 
 def add_unoccluded(radiance, slot, contribution, occluded):

@@ -12,10 +12,12 @@ import pytest
 
 import raysort
 from raysort import contract
+from raysort import pipeline as pipeline_module
 from raysort.contract import check_sort
 from raysort.errors import PluginContractError, RaysortError
 from raysort.rays import MAX_PACKET, RayBatch
 from raysort.sorters.none import NoneSorter
+from raysort.stats import Counters
 
 NAME = "my_sorter"
 N = 10
@@ -225,22 +227,34 @@ def test_third_party_subclass_of_trusted_builtin_is_checked(registered):
         pipe.render(8, 8, 1)
 
 
-CHECKS = {"sorters": "check_sort", "traversals": "check_hits", "shaders": "check_bounce",
-          "generators": "check_generated"}
+# The check the pipeline runs on each plugin's result, which trusted built-ins skip with
+# check_plugins=False (the rest of a sorter's checks runs inside the gather, and a
+# traversal's in the scatter: test_fused_checks_catch_builtin_plugins).
+CHECKS = {"sorters": "sort_arrays", "traversals": "scatter_checked",
+          "shaders": "check_bounce", "generators": "check_generated"}
 
 
 @pytest.fixture
 def check_calls(monkeypatch):
-    """Record (check, plugin name) for each plugin check the pipeline runs."""
+    """Record (check, plugin name) for each plugin check the pipeline runs (the hits
+    check, which gets no plugin, as the pipeline's traversal)."""
     calls = []
-    for check in CHECKS.values():
+    for check in ("sort_arrays", "check_bounce", "check_generated", "check_sort",
+                  "check_hits"):
         real = getattr(contract, check)
 
-        def spy(plugin, *args, _real=real, _check=check):
+        def spy(plugin, *args, _real=real, _check=check, **kwargs):
             calls.append((_check, plugin if isinstance(plugin, str) else plugin.name))
-            return _real(plugin, *args)
+            return _real(plugin, *args, **kwargs)
 
         monkeypatch.setattr(contract, check, spy)
+    real_scatter = pipeline_module.scatter_checked
+
+    def scatter_spy(*args):
+        calls.append(("scatter_checked", "<the pipeline's traversal>"))
+        return real_scatter(*args)
+
+    monkeypatch.setattr(pipeline_module, "scatter_checked", scatter_spy)
     return calls
 
 
@@ -253,7 +267,7 @@ def test_which_sorters_are_checked(check_calls, sorter, check_plugins, checked):
     """check_plugins=False skips the check only for built-ins marked trusted."""
     assert raysort.load("sorters", sorter).trusted == (sorter in ("none", "nah"))
     raysort.Pipeline("plane", sorter=sorter, check_plugins=check_plugins).render(8, 8, 1)
-    sorts = [name for check, name in check_calls if check == "check_sort"]
+    sorts = [name for check, name in check_calls if check == "sort_arrays"]
     assert bool(sorts) == checked
     assert set(sorts) <= {sorter}
 
@@ -261,14 +275,51 @@ def test_which_sorters_are_checked(check_calls, sorter, check_plugins, checked):
 @pytest.mark.parametrize("check_plugins", [True, False])
 def test_every_kind_is_checked_unless_trusted(check_calls, check_plugins):
     """With check_plugins=True every plugin result is checked; with False none of the
-    trusted built-ins (pinhole, nah, wide, lambert) is."""
+    trusted built-ins (pinhole, nah, wide8, lambert) is; check_sort and check_hits run
+    only to name a fault."""
     pipe = raysort.Pipeline("plane", check_plugins=check_plugins)
     for kind in CHECKS:
         plugin = getattr(pipe, kind[:-1])
         assert vars(type(plugin)).get("trusted") is True, plugin
     pipe.render(8, 8, 1)
-    expected = {(CHECKS[kind], getattr(pipe, kind[:-1]).name) for kind in CHECKS}
+    expected = {(CHECKS[kind], getattr(pipe, kind[:-1]).name) for kind in CHECKS
+                if kind != "traversals"} | {("scatter_checked", "<the pipeline's traversal>")}
     assert set(check_calls) == (expected if check_plugins else set())
+
+
+def _write_prim(value):
+    def intersect(self, bvh, packets, any_hit=False):
+        packets.prim[packets.starts[0]] = value
+        return Counters()
+    return intersect
+
+
+def _move_first_sub_packet(self, bvh, packets, any_hit=False):
+    packets.starts[0] = 1_000_000
+    return Counters()
+
+
+def _repeat_first_ray(self, rays, packets, bounds):
+    order = np.arange(len(rays), dtype=np.int32)
+    order[1:2] = 0
+    return order, np.array([0, len(rays)], np.int32)
+
+
+@pytest.mark.parametrize("kind, method, broken, match", [
+    ("sorters", "sort", _repeat_first_ray, "permutation"),
+    ("traversals", "intersect", _write_prim(50_000_000), "prim = 50000000"),
+    ("traversals", "intersect", _write_prim(-7), "prim = -7"),
+    ("traversals", "intersect", _move_first_sub_packet, "changed packets.starts"),
+])
+def test_fused_checks_catch_builtin_plugins(monkeypatch, kind, method, broken, match):
+    """A built-in sorter or traversal gone wrong is caught by the checks inside the gather
+    and the scatter, and named."""
+    pipe = raysort.Pipeline("plane")
+    plugin = getattr(pipe, kind[:-1])
+    monkeypatch.setattr(type(plugin), method, broken)
+    with pytest.raises(PluginContractError, match=match) as info:
+        pipe.render(8, 8, 1)
+    assert (info.value.kind, info.value.name) == (kind, plugin.name)
 
 
 def test_untrusted_valid_sorter_is_checked_and_works(registered, check_calls):
@@ -277,8 +328,9 @@ def test_untrusted_valid_sorter_is_checked_and_works(registered, check_calls):
     registered("counting_test", CountingSorter)
     image = raysort.Pipeline("plane", sorter="counting_test",
                              check_plugins=False).render(8, 8, 1).image
-    assert ("check_sort", "counting_test") in check_calls
-    assert {name for check, name in check_calls if check == "check_sort"} == {"counting_test"}
+    assert ("sort_arrays", "counting_test") in check_calls
+    assert {name for check, name in check_calls if check == "sort_arrays"} == {"counting_test"}
+    assert not {check for check, name in check_calls} & {"check_sort", "check_hits"}
     ref = raysort.Pipeline("plane", sorter="none").render(8, 8, 1).image
     assert image.tobytes() == ref.tobytes()
 

@@ -417,3 +417,27 @@ def test_add_unoccluded_is_np_add_at():
     got = start.copy()
     add_unoccluded(got, slot, contribution, occluded)
     assert np.array_equal(got.view(np.uint64), want.view(np.uint64))
+
+
+@pytest.mark.parametrize("order, offsets", [
+    ([0, 1, 1, 3], [0, 4]),            # a ray twice
+    ([0, 1, 2, 7], [0, 4]),            # a ray beyond the batch
+    ([0, 1, 2, 3], [0, 2, 2, 4]),      # an empty sub-packet
+    ([0, 1, 2, 3], [0, 5]),            # offsets beyond the batch
+    ([0, 1, 2], [0, 3]),               # too few rays
+])
+def test_gather_rejects_a_broken_sort_result(order, offsets):
+    """The public gather checks the order it reads through (a ValueError, not a crash)."""
+    rays = RayBatch.from_arrays(np.zeros((4, 3)), np.tile([0, 0, 1.0], (4, 1)))
+    with pytest.raises(ValueError, match="permutation"):
+        gather(rays, np.array(order, np.int32), np.array(offsets, np.int32))
+
+
+def test_scatter_rejects_an_index_beyond_the_hits():
+    rays = RayBatch.from_arrays(np.zeros((4, 3)), np.tile([0, 0, 1.0], (4, 1)))
+    packets = gather(rays, np.arange(4, dtype=np.int32), np.array([0, 4], np.int32))
+    packets.index[2] = 4
+    with pytest.raises(ValueError, match="beyond"):
+        scatter(packets, 4)
+    with pytest.raises(ValueError, match="beyond"):
+        scatter_occluded(packets, 4)

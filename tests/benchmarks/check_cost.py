@@ -1,35 +1,86 @@
-"""What the contract checks cost in a frame: each check of raysort.contract timed by thread CPU.
+"""What the contract checks cost in a frame: the same frame with checks on and off.
 
-    python tests/benchmarks/check_cost.py [scene] [--size 256] [--spp 16]
+    python tests/benchmarks/check_cost.py [scene] [--size 256] [--spp 16] [--rounds 7]
 
-Renders ``scene`` once with the default pipeline (``check_plugins=True``), one thread, with
-every check function of :mod:`raysort.contract` wrapped in a thread-CPU timer, and prints each
-check's seconds and share of the frame's CPU.  (The wrappers add a few microseconds per call.)
+Renders ``scene`` with the default pipeline (raysort's own trusted plugins) twice per
+round, one thread: ``check_plugins=True`` (every plugin result checked, as for a plugin
+from outside raysort) and ``check_plugins=False`` (the trusted built-ins skip their
+checks).  A warm-up round first, the order alternating per round; per round the extra
+frame CPU of the checked frame over the unchecked one, and their median with its
+spread.  The images are compared bit for bit.
+
+The checks of a sorter's order, of the rays and of a traversal's hits run inside the
+gather and the scatter, so the pipeline's own ``check`` stage timer sees only the rest
+(shown too); the on/off difference is the whole cost.  It is a per cent or two of a
+frame, less than the noise of a shared machine, so the script also replays every
+gather and scatter call of one checked frame with and without its checks, interleaved
+call by call, and reports their difference as a share of that frame's CPU (warm caches:
+the checks read what the gather and scatter read anyway, so the extra is mostly
+arithmetic).  Run it on an otherwise idle machine and read the spreads.
 """
 import argparse
-import collections
+import statistics
 import time
 
-from raysort import contract
+from raysort import pipeline as pipeline_module
+from raysort import rays as rays_module
+from raysort.bench.report import machine_info
 from raysort.pipeline import Pipeline
 from raysort.scene import load_scene
 
-CHECKS = ("check_ray_batch", "check_packets", "check_sort", "before_traversal", "check_hits",
-          "check_counters", "check_generated", "check_bounce")
+
+def captured_frame(pipe, size, spp):
+    """Render one frame, recording the arguments of every gather and scatter call;
+    returns (frame CPU seconds, [(gather args, traversal args, any_hit)])."""
+    calls, gathered = [], {}
+
+    def gather(rays, order, offsets, packets, keep_tmax=False, check_order=True):
+        out = rays_module.gather_checked(rays, order, offsets, packets, keep_tmax, check_order)
+        gathered["last"] = (rays, order, offsets, packets)
+        return out
+
+    def scatter(batch, order, offsets, tmax, n_prim, any_hit):
+        calls.append((gathered["last"], (batch, tmax, n_prim), any_hit))
+        return rays_module.scatter_checked(batch, order, offsets, tmax, n_prim, any_hit)
+
+    real = pipeline_module.gather_checked, pipeline_module.scatter_checked
+    pipeline_module.gather_checked, pipeline_module.scatter_checked = gather, scatter
+    try:
+        start = time.thread_time()
+        pipe.render(size, size, spp)
+        return time.thread_time() - start, calls
+    finally:
+        pipeline_module.gather_checked, pipeline_module.scatter_checked = real
 
 
-def timed_checks():
-    """Wrap every check in place; return the Counter their CPU seconds add up in."""
-    spent = collections.Counter()
-    for name in CHECKS:
-        def wrapper(*args, _check=getattr(contract, name), _name=name, **kwargs):
-            start = time.thread_time()
-            try:
-                return _check(*args, **kwargs)
-            finally:
-                spent[_name] += time.thread_time() - start
-        setattr(contract, name, wrapper)
+def replay(calls, checked):
+    """Thread-CPU seconds of the frame's gathers and scatters, with or without checks."""
+    spent = 0.0
+    for (rays, order, offsets, packets), (batch, tmax, n_prim), any_hit in calls:
+        start = time.thread_time()
+        rays_module.gather_checked(rays, order, offsets, packets,
+                                   keep_tmax=checked and not any_hit, check_order=checked)
+        if checked:
+            rays_module.scatter_checked(batch, order, offsets, tmax, n_prim, any_hit)
+        elif any_hit:
+            rays_module.scatter_occluded(batch, len(order))
+        else:
+            rays_module.scatter(batch, len(order))
+        spent += time.thread_time() - start
     return spent
+
+
+def fused_share(pipe, size, spp, rounds):
+    """The fused checks' extra CPU as a share of a frame (replayed, per round)."""
+    frame, calls = captured_frame(pipe, size, spp)
+    shares = []
+    for r in range(rounds + 1):
+        pair = {}
+        for checked in ((True, False) if r % 2 else (False, True)):
+            pair[checked] = replay(calls, checked)
+        if r:
+            shares.append(100 * (pair[True] - pair[False]) / frame)
+    return shares
 
 
 def main():
@@ -37,21 +88,41 @@ def main():
     parser.add_argument("scene", nargs="?", default="sibenik")
     parser.add_argument("--size", type=int, default=256, help="image edge in pixels (256)")
     parser.add_argument("--spp", type=int, default=16, help="samples per pixel (16)")
+    parser.add_argument("--rounds", type=int, default=7, help="timed rounds (7)")
     args = parser.parse_args()
-    pipe = Pipeline(load_scene(args.scene), threads=1)
-    spent = timed_checks()
-    pipe.render(32, 32, 1)                      # warm-up: the lazy wide BVHs
-    spent.clear()
-    start = time.thread_time()
-    result = pipe.render(args.size, args.size, args.spp)
-    frame = time.thread_time() - start
-    print(f"{args.scene} {args.size}x{args.size} {args.spp} spp, "
-          f"{pipe.sorter.name} + {pipe.traversal.name}: frame {frame:.3f} CPU s")
-    for name, seconds in spent.most_common():
-        print(f"  {name:18s} {seconds:.4f} s  {100 * seconds / frame:5.2f} %")
-    print(f"  {'all checks':18s} {sum(spent.values()):.4f} s  "
-          f"{100 * sum(spent.values()) / frame:5.2f} %")
-    print(result.stats)
+    scene = load_scene(args.scene)
+    pipes = {"on": Pipeline(scene, threads=1, check_plugins=True),
+             "off": Pipeline(scene, threads=1, check_plugins=False)}
+    seconds = {name: [] for name in pipes}
+    check_stage, images = [], {}
+    for r in range(args.rounds + 1):
+        for name in (("on", "off") if r % 2 else ("off", "on")):
+            start = time.thread_time()
+            result = pipes[name].render(args.size, args.size, args.spp)
+            spent = time.thread_time() - start
+            images[name] = result.image
+            if r:                               # round 0 warms up (lazy wide BVHs)
+                seconds[name].append(spent)
+                if name == "on":
+                    check_stage.append(result.stats.stage_seconds.get("check", 0.0) / spent)
+    assert images["on"].tobytes() == images["off"].tobytes(), "checks changed the image"
+    extra = [100 * (on / off - 1) for on, off in zip(seconds["on"], seconds["off"])]
+    info = machine_info()
+    print(f"{args.scene} {args.size}x{args.size} {args.spp} spp, {pipes['on'].sorter.name} + "
+          f"{pipes['on'].traversal.name}, one thread; {info['cpu']}, ISA {info['isa']}")
+    for name in pipes:
+        print(f"  checks {name:3s}: frame {statistics.median(seconds[name]):.3f} CPU s "
+              f"[{min(seconds[name]):.3f}-{max(seconds[name]):.3f}]")
+    print(f"  extra CPU with checks: median {statistics.median(extra):+.2f} % "
+          f"[{min(extra):+.2f} .. {max(extra):+.2f}] (per round: "
+          f"{', '.join(f'{x:+.1f}' for x in extra)})")
+    print(f"  'check' stage alone: {100 * statistics.median(check_stage):.2f} % of the frame")
+    shares = fused_share(pipes["on"], args.size, args.spp, args.rounds)
+    print(f"  checks inside gather and scatter (replayed): median "
+          f"{statistics.median(shares):.2f} % of the frame [{min(shares):.2f} .. "
+          f"{max(shares):.2f}]")
+    print(f"  => checks in all: {100 * statistics.median(check_stage) + statistics.median(shares):.2f} "
+          f"% of the frame ('check' stage + fused)")
 
 
 if __name__ == "__main__":

@@ -374,9 +374,12 @@ RS_INLINE int rs_tri4(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
  * active only if its origin and direction are finite and 0 <= tmin < tmax;
  * otherwise (NaN rays, padding) it is stored inactive.  Subnormal direction
  * components are stored as zeros, so 1 / d is either finite or +-inf. */
-RS_INLINE void rs_gather4(float *const dst[RS_PACKET_ROWS], int32_t *prim, float *u, float *v,
-                          int j, const float *const src[RS_RAY_ROWS], const int32_t idx[4])
+RS_INLINE int rs_gather4(float *const dst[RS_PACKET_ROWS], int32_t *prim, float *u, float *v,
+                         int j, const float *const src[RS_RAY_ROWS], const int32_t idx[4])
 {
+    /* Returns the lanes (bits) holding a ray that breaks the ray contract: active
+       (tmin < tmax) yet with tmin < 0 or a non-finite origin or direction.  Such a ray,
+       like every invalid one, is stored inactive. */
     float lane[RS_RAY_ROWS][4];
     for (int k = 0; k < 4; ++k) {
         int32_t s = idx[k];
@@ -384,17 +387,18 @@ RS_INLINE void rs_gather4(float *const dst[RS_PACKET_ROWS], int32_t *prim, float
             lane[c][k] = s >= 0 ? src[c][s] : 0.0f;
     }
     const rs_v4f zero = rs_set1(0.0f), inf = rs_set1(INFINITY);
-    rs_v4m ok = rs_mask_from_bits((idx[0] >= 0) | (idx[1] >= 0) << 1 | (idx[2] >= 0) << 2 | (idx[3] >= 0) << 3);
+    int present = (idx[0] >= 0) | (idx[1] >= 0) << 1 | (idx[2] >= 0) << 2 | (idx[3] >= 0) << 3;
     rs_v4f row[RS_RAY_ROWS];
     for (int c = 0; c < RS_RAY_ROWS; ++c)
         row[c] = rs_load(lane[c]);
+    rs_v4m good = rs_ge(row[RS_RAY_TMIN], zero);
     for (int a = 0; a < 3; ++a) {   /* finite: |x| < inf, false for NaN */
         rs_v4f o = row[RS_RAY_OX + a], d = row[RS_RAY_DX + a];
-        ok = rs_and(ok, rs_lt(rs_max(o, rs_sub(zero, o)), inf));
-        ok = rs_and(ok, rs_lt(rs_max(d, rs_sub(zero, d)), inf));
+        good = rs_and(good, rs_lt(rs_max(o, rs_sub(zero, o)), inf));
+        good = rs_and(good, rs_lt(rs_max(d, rs_sub(zero, d)), inf));
     }
-    ok = rs_and(ok, rs_and(rs_ge(row[RS_RAY_TMIN], zero),
-                           rs_lt(row[RS_RAY_TMIN], row[RS_RAY_TMAX])));
+    rs_v4m active = rs_lt(row[RS_RAY_TMIN], row[RS_RAY_TMAX]);
+    rs_v4m ok = rs_and(rs_mask_from_bits(present), rs_and(good, active));
     for (int a = 0; a < 3; ++a) {
         rs_v4f d = rs_blend(ok, rs_flush_subnormal(row[RS_RAY_DX + a]), zero);
         rs_store(dst[RS_PACKET_OX + a] + j, rs_blend(ok, row[RS_RAY_OX + a], zero));
@@ -406,6 +410,7 @@ RS_INLINE void rs_gather4(float *const dst[RS_PACKET_ROWS], int32_t *prim, float
     rs_storei(prim + j, rs_set1i(-1));
     rs_store(u + j, zero);
     rs_store(v + j, zero);
+    return present & rs_movemask(active) & ~rs_movemask(good);
 }
 
 #endif

@@ -1,0 +1,95 @@
+"""The contract rules one element at a time, shared by the stand-alone checks
+(:mod:`raysort._contract`) and the checks fused into the gather and the scatter
+(:mod:`raysort._gather`), so both apply the same rules.
+
+Each returns non-zero when the element breaks its contract, written without
+branches so that loops over a block vectorise.  A float ``x`` is finite exactly
+when ``x - x == 0``.
+"""
+from libc.stdint cimport int32_t, uint8_t, uint32_t
+
+
+cdef inline int ray_bad(float ox, float oy, float oz, float dx, float dy, float dz, float tmin,
+                        float tmax) noexcept nogil:
+    """An active ray (tmin < tmax) needs tmin >= 0 and a finite origin and direction."""
+    cdef float acc = (ox - ox) + (oy - oy) + (oz - oz) + (dx - dx) + (dy - dy) + (dz - dz)
+    return (tmin < tmax) & ((not (tmin >= 0)) | (acc != 0))
+
+
+cdef inline int closest_bad(int32_t p, float tmin, float t, float t0, float u, float v,
+                            uint32_t n_prim) noexcept nogil:
+    """A closest hit's lane: prim is -1 or below n_prim; a hit lies in (tmin, t0) with
+    finite u, v (t0: the lane's t before the traversal ran, the ray's tmax)."""
+    return ((<uint32_t> (p + 1) > n_prim)
+            | ((p >= 0) & ((not (tmin < t)) | (not (t < t0)) | ((u - u) + (v - v) != 0))))
+
+
+cdef inline int any_hit_bad(int32_t p, uint32_t n_prim) noexcept nogil:
+    """An any-hit lane: prim is -1 or below n_prim (t is the traversal's business)."""
+    return <uint32_t> (p + 1) > n_prim
+
+
+cdef inline Py_ssize_t large_packet(const int32_t *packets, Py_ssize_t n_big,
+                                    int32_t j) noexcept nogil:
+    """The last p < n_big with packets[p] <= j (packets ascend from 0)."""
+    cdef Py_ssize_t lo = 0, hi = n_big, mid
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if packets[mid] <= j:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+cdef inline int packet_bounds(int32_t first, const int32_t *packets, Py_ssize_t n_big,
+                              int32_t n, Py_ssize_t *k_big, int32_t *lo,
+                              int32_t *hi) noexcept nogil:
+    """The large packet ``[lo, hi)`` holding ray ``first``, the first of a sub-packet
+    (``packets``: n_big + 1 valid boundaries ending at n; ``k_big``: the previous
+    sub-packet's, updated); 1 if ``first`` is not a ray of ``[0, n)``."""
+    if first < 0 or first >= n:
+        return 1
+    if not (packets[k_big[0]] <= first < packets[k_big[0] + 1]):   # usually the same one
+        k_big[0] = large_packet(packets, n_big, first)
+    lo[0], hi[0] = packets[k_big[0]], packets[k_big[0] + 1]
+    return 0
+
+
+cdef inline int32_t checked_ray(int32_t j, int32_t lo, int32_t hi, int32_t n, uint8_t *seen,
+                                int *bad) noexcept nogil:
+    """``j`` if it is a ray of the large packet ``[lo, hi)`` (within ``[0, n)``), else -1;
+    ``*bad`` set unless it is also seen for the first time (``seen``: n + 1 bytes, the
+    last a spare), which marks it."""
+    cdef int inside = (j >= lo) & (j < hi)
+    cdef int32_t slot = j if inside else n
+    bad[0] |= (not inside) | seen[slot]
+    seen[slot] = 1
+    return j if inside else -1
+
+
+cdef inline int sub_packet_bad(const int32_t *order, Py_ssize_t a, Py_ssize_t b,
+                               const int32_t *packets, Py_ssize_t n_big, int32_t n,
+                               Py_ssize_t *k_big, uint8_t *seen) noexcept nogil:
+    """A sorter's sub-packet ``order[a:b]`` (a < b): rays of ``[0, n)``, all in one large
+    packet and none seen before (see :func:`packet_bounds`, :func:`checked_ray`)."""
+    cdef Py_ssize_t i
+    cdef int32_t lo, hi
+    cdef int bad = 0
+    if packet_bounds(order[a], packets, n_big, n, k_big, &lo, &hi):
+        return 1
+    for i in range(a, b):
+        checked_ray(order[i], lo, hi, n, seen, &bad)
+    return bad
+
+
+cdef inline int offsets_bad(const int32_t *offsets, Py_ssize_t n_sub, int32_t n,
+                            int32_t max_packet) noexcept nogil:
+    """A sorter's offsets: from 0 to n, sub-packets of 1..max_packet rays."""
+    cdef Py_ssize_t k
+    cdef long long size
+    cdef int bad = (offsets[0] != 0) | (offsets[n_sub] != n)
+    for k in range(n_sub):
+        size = <long long> offsets[k + 1] - offsets[k]
+        bad |= (size <= 0) | (size > max_packet)
+    return bad
