@@ -3,6 +3,7 @@
     python tests/benchmarks/sort_cost.py [scene ...] [--sorters a,b] [--traversals wide8,stream]
                                          [--rounds 7] [--size 256] [--json out.json]
                                          [--markdown]
+    python tests/benchmarks/sort_cost.py --medians run1.json run2.json ...
 
 For each scene (default: sibenik, sponza, forest) the first-bounce diffuse rays of a
 ``--size`` square render at 1 spp (:func:`raysort.workloads.workload`, the rays ``raysort
@@ -15,7 +16,9 @@ Per configuration it prints the medians of sort, gather and trace [min-max], and
 the per-round shares (sort + gather) / trace [min-max]: the budget of issue 13 is 10 %.  Every
 configuration's hits must equal the first one's (t bit for bit, prim), or the run fails.
 ``--markdown`` also prints each scene as a Markdown table (sorters by rows, one sort + gather
-share column per traversal), as BENCHMARKS.md shows it.
+share column per traversal), as BENCHMARKS.md shows it.  ``--medians`` runs nothing: it prints,
+per scene, sorter and traversal, the median over the given ``--json`` files of each run's median
+sort time and share (for runs of two builds alternated on a shared machine).
 """
 import argparse
 import json
@@ -103,6 +106,27 @@ def markdown(scene, rows, traversals):
     return "\n".join(lines)
 
 
+def medians(paths):
+    """Per (scene, sorter, traversal): the median over runs of each run's median sort
+    seconds, gather seconds, trace seconds and share."""
+    runs = {}
+    for path in paths:
+        with open(path, encoding="utf-8") as fh:
+            report = json.load(fh)
+        for scene, data in report["scenes"].items():
+            for r in data["rows"]:
+                runs.setdefault((scene, r["sorter"], r["traversal"]), []).append(r)
+    print(f"median over {len(paths)} runs of each run's median "
+          f"(thread-CPU ms; share = (sort + gather) / trace)")
+    print(f"{'scene':10s}{'sorter':18s}{'traversal':10s}{'sort':>8s}{'gather':>8s}"
+          f"{'trace':>8s}{'share':>9s}")
+    for (scene, sorter, traversal), rows in runs.items():
+        sort, gath, trace, share = (np.median([r[key]["median"] for r in rows])
+                                    for key in ("sort", "gather", "trace", "share"))
+        print(f"{scene:10s}{sorter:18s}{traversal:10s}{1e3 * sort:8.2f}{1e3 * gath:8.2f}"
+              f"{1e3 * trace:8.1f}{100 * share:7.1f} %")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenes", nargs="*", default=["sibenik", "sponza", "forest"])
@@ -114,7 +138,12 @@ def main(argv=None):
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--json", default=None, help="also write the results here")
     parser.add_argument("--markdown", action="store_true", help="also print Markdown tables")
+    parser.add_argument("--medians", nargs="+", metavar="JSON",
+                        help="only summarise these --json files (see the module docstring)")
     args = parser.parse_args(argv)
+    if args.medians:
+        medians(args.medians)
+        return 0
     sorters = (args.sorters.split(",") if args.sorters
                else [s for s in registry.available("sorters")])
     traversals = args.traversals.split(",")
