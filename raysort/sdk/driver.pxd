@@ -27,7 +27,8 @@ no call.
 """
 from libc.stdint cimport int32_t
 from raysort._types cimport (rs_node, rs_tri, rs_rays, rs_frustum, rs_counters,
-                             rs_tri1, rs_tri4, rs_active4, rs_minf, rs_maxf, rs_prefetch)
+                             rs_tri1, rs_tri4, rs_active4, rs_minf, rs_maxf, rs_prefetch,
+                             RS_BOX_SLACK)
 
 
 cdef struct Geometry:
@@ -59,6 +60,34 @@ cdef struct Kernel:
 
 cdef object run(const Kernel *kernel, object bvh, object packets, bint any_hit,
                 object tree=*, object leaves=*)
+
+
+cdef struct Waiting:
+    # a child box a single-ray kernel of a wide tree will visit, or may skip
+    int32_t ref         # >= 0: a node; < 0: a leaf, its first item -ref - 1
+    int32_t count       # the leaf's items (triangles, or triangle groups)
+    float entry         # where the ray enters the box
+
+
+cdef inline void insert_nearest_first(Waiting *hit, int m, Waiting child) noexcept nogil:
+    """Insert ``child`` into ``hit[0:m]``, which is sorted nearest first."""
+    cdef int j = m
+    while j > 0 and hit[j - 1].entry > child.entry:
+        hit[j] = hit[j - 1]
+        j -= 1
+    hit[j] = child
+
+
+cdef inline bint pop_nearest(Waiting *stack, int *sp, float t, Waiting *next) noexcept nogil:
+    """Pop waiting boxes until one the ray still enters before its closest hit ``t``
+    (``entry <= t * slack`` is exactly the decision a new slab test would make) and put
+    it in ``next``; False when the stack runs empty."""
+    while sp[0] > 0:
+        sp[0] -= 1
+        if stack[sp[0]].entry <= t * RS_BOX_SLACK:
+            next[0] = stack[sp[0]]
+            return True
+    return False
 
 
 cdef inline bint active(const rs_rays *r, int i) noexcept nogil:

@@ -10,28 +10,22 @@ decision a new slab test would make).  Each lane of the 4-wide test performs
 the hits equal brute force bit for bit.
 """
 from libc.stdint cimport int32_t
-from raysort._types cimport (rs_node4, rs_rays, rs_counters, rs_tri1, rs_node4_hit,
-                             rs_prefetch, RS_BOX_SLACK)
-from raysort.sdk.driver cimport Kernel, Geometry, Scratch, run, active, leaf_ray
+from raysort._types cimport rs_node4, rs_rays, rs_counters, rs_tri1, rs_node4_hit, rs_prefetch
+from raysort.sdk.driver cimport (Kernel, Geometry, Scratch, Waiting, run, active, leaf_ray,
+                                 insert_nearest_first, pop_nearest)
 
 from raysort import isa
 from raysort.plugin import Traversal
 
 
-cdef struct Entry:
-    int32_t ref         # >= 0: a 4-wide node; < 0: a leaf, first triangle -ref - 1
-    int32_t count       # leaf triangles
-    float entry         # where the ray enters the box
-
-
 cdef void trace_wide(const Geometry *g, rs_rays *r, int start, int count, int any_hit,
                      Scratch *w, rs_counters *counters) noexcept nogil:
     cdef rs_counters c = counters[0]    # a local copy stays in registers
-    cdef Entry *stack = <Entry *> w.stack
-    cdef Entry hit[4]
-    cdef Entry tmp
+    cdef Waiting *stack = <Waiting *> w.stack     # ref >= 0: a 4-wide node; < 0: a leaf
+    cdef Waiting hit[4]
+    cdef Waiting child
     cdef float entry[4]
-    cdef int i, k, j, m, mask, sp, ref, first
+    cdef int i, k, m, mask, sp, ref, first
     cdef const rs_node4 *n
     cdef const rs_node4 *nodes4 = <const rs_node4 *> g.tree   # BVH.wide
     for i in range(start, start + count):
@@ -44,19 +38,11 @@ cdef void trace_wide(const Geometry *g, rs_rays *r, int start, int count, int an
                 n = &nodes4[ref]
                 c.box4 += 1
                 mask = rs_node4_hit(r, i, n, entry)
-                # the children hit, nearest first (insertion sort of at most 4)
-                m = 0
+                m = 0                              # the children hit, nearest first
                 for k in range(4):
                     if mask >> k & 1:
-                        hit[m].ref = n.child[k]
-                        hit[m].count = n.count[k]
-                        hit[m].entry = entry[k]
-                        j = m
-                        while j > 0 and hit[j - 1].entry > hit[j].entry:
-                            tmp = hit[j - 1]
-                            hit[j - 1] = hit[j]
-                            hit[j] = tmp
-                            j -= 1
+                        child.ref, child.count, child.entry = n.child[k], n.count[k], entry[k]
+                        insert_nearest_first(hit, m, child)
                         m += 1
                 for k in range(m - 1, 0, -1):      # farther children wait, farthest deepest
                     stack[sp] = hit[k]
@@ -71,21 +57,14 @@ cdef void trace_wide(const Geometry *g, rs_rays *r, int start, int count, int an
                 leaf_ray(g, r, i, -ref - 1, first, any_hit, &c)
                 if not active(r, i):        # an any-hit query found its hit
                     break
-            # the nearest waiting box the ray still reaches before its closest hit
-            ref = -1 << 30
-            while sp > 0:
-                sp -= 1
-                if stack[sp].entry <= r.t[i] * RS_BOX_SLACK:
-                    ref = stack[sp].ref
-                    first = stack[sp].count
-                    break
-            if ref == -1 << 30:
+            if not pop_nearest(stack, &sp, r.t[i], &child):
                 break
+            ref, first = child.ref, child.count
     counters[0] = c
 
 
 # up to three waiting children per level of the 4-wide tree
-cdef Kernel WIDE = Kernel(trace_wide, 3 * sizeof(Entry), 0, 0)
+cdef Kernel WIDE = Kernel(trace_wide, 3 * sizeof(Waiting), 0, 0)
 
 
 def trace(bvh, packets, bint any_hit):

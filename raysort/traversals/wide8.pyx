@@ -12,17 +12,12 @@ inputs (v0, e1, e2) precomputed, tested eight at a time.  Every lane performs
 """
 from libc.stdint cimport int32_t
 from raysort._types cimport (rs_node8, rs_tri8, rs_rays, rs_counters, rs_ray8, rs_ray8_load,
-                             rs_node8_hit, rs_tri8_hit, rs_lowest_bit, rs_prefetch, RS_BOX_SLACK)
-from raysort.sdk.driver cimport Kernel, Geometry, Scratch, run, active
+                             rs_node8_hit, rs_tri8_hit, rs_lowest_bit, rs_prefetch)
+from raysort.sdk.driver cimport (Kernel, Geometry, Scratch, Waiting, run, active,
+                                 insert_nearest_first, pop_nearest)
 
 from raysort import isa
 from raysort.plugin import Traversal
-
-
-cdef struct Entry:
-    int32_t ref         # >= 0: an 8-wide node; < 0: a leaf, first group -ref - 1
-    int32_t groups      # leaf triangle groups
-    float entry         # where the ray enters the box
 
 
 cdef inline void prefetch_node8(const rs_node8 *nodes8, int ref) noexcept nogil:
@@ -47,12 +42,12 @@ cdef inline void prefetch_group(const rs_tri8 *groups8, int group) noexcept nogi
 cdef void trace_wide8(const Geometry *g, rs_rays *r, int start, int count, int any_hit,
                       Scratch *w, rs_counters *counters) noexcept nogil:
     cdef rs_counters c = counters[0]    # a local copy stays in registers
-    cdef Entry *stack = <Entry *> w.stack
-    cdef Entry hit[8]
-    cdef Entry tmp
+    cdef Waiting *stack = <Waiting *> w.stack     # ref >= 0: an 8-wide node; < 0: groups
+    cdef Waiting hit[8]
+    cdef Waiting child
     cdef float entry[8]
     cdef rs_ray8 ray
-    cdef int i, k, j, m, mask, sp, ref, groups
+    cdef int i, k, m, mask, sp, ref, groups
     cdef const rs_node8 *n
     cdef const rs_node8 *nodes8 = <const rs_node8 *> g.tree      # BVH.wide8.nodes
     cdef const rs_tri8 *groups8 = <const rs_tri8 *> g.leaves     # BVH.wide8.groups
@@ -68,19 +63,12 @@ cdef void trace_wide8(const Geometry *g, rs_rays *r, int start, int count, int a
                 n = &nodes8[ref]
                 c.box4 += 1
                 mask = rs_node8_hit(r, i, &ray, n, entry)
-                # the children hit, nearest first (insertion sort of at most 8)
-                m = 0
+                m = 0                              # the children hit, nearest first
                 while mask:
                     k = rs_lowest_bit(mask)
                     mask &= mask - 1
-                    tmp.ref = n.child[k]
-                    tmp.groups = n.count[k]
-                    tmp.entry = entry[k]
-                    j = m
-                    while j > 0 and hit[j - 1].entry > tmp.entry:
-                        hit[j] = hit[j - 1]
-                        j -= 1
-                    hit[j] = tmp
+                    child.ref, child.count, child.entry = n.child[k], n.count[k], entry[k]
+                    insert_nearest_first(hit, m, child)
                     m += 1
                 for k in range(m - 1, 0, -1):      # farther children wait, farthest deepest
                     stack[sp] = hit[k]
@@ -89,7 +77,7 @@ cdef void trace_wide8(const Geometry *g, rs_rays *r, int start, int count, int a
                                 else <const rs_node8 *> &groups8[-hit[k].ref - 1])
                 if m:
                     ref = hit[0].ref
-                    groups = hit[0].groups
+                    groups = hit[0].count
                     if ref >= 0:
                         prefetch_node8(nodes8, ref)
                     else:
@@ -101,21 +89,14 @@ cdef void trace_wide8(const Geometry *g, rs_rays *r, int start, int count, int a
                     rs_tri8_hit(r, i, &ray, &groups8[k], any_hit)
                 if not active(r, i):        # an any-hit query found its hit
                     break
-            # the nearest waiting box the ray still reaches before its closest hit
-            ref = -1 << 30
-            while sp > 0:
-                sp -= 1
-                if stack[sp].entry <= r.t[i] * RS_BOX_SLACK:
-                    ref = stack[sp].ref
-                    groups = stack[sp].groups
-                    break
-            if ref == -1 << 30:
+            if not pop_nearest(stack, &sp, r.t[i], &child):
                 break
+            ref, groups = child.ref, child.count
     counters[0] = c
 
 
 # up to seven waiting children per level (the 8-wide tree is no deeper than the binary one)
-cdef Kernel WIDE8 = Kernel(trace_wide8, 7 * sizeof(Entry), 0, 0)
+cdef Kernel WIDE8 = Kernel(trace_wide8, 7 * sizeof(Waiting), 0, 0)
 
 
 def trace(bvh, packets, bint any_hit):
