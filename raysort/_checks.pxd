@@ -42,27 +42,54 @@ cdef inline Py_ssize_t large_packet(const int32_t *packets, Py_ssize_t n_big,
     return lo
 
 
+cdef inline int packet_bounds(int32_t first, const int32_t *packets, Py_ssize_t n_big,
+                              int32_t n, Py_ssize_t *k_big, int32_t *lo,
+                              int32_t *hi) noexcept nogil:
+    """The large packet ``[lo, hi)`` holding ray ``first``, the first of a sub-packet
+    (``packets``: n_big + 1 valid boundaries ending at n; ``k_big``: the previous
+    sub-packet's, updated); 1 if ``first`` is not a ray of ``[0, n)``."""
+    if first < 0 or first >= n:
+        return 1
+    if not (packets[k_big[0]] <= first < packets[k_big[0] + 1]):   # usually the same one
+        k_big[0] = large_packet(packets, n_big, first)
+    lo[0], hi[0] = packets[k_big[0]], packets[k_big[0] + 1]
+    return 0
+
+
+cdef inline int range_bad(const int32_t *order, Py_ssize_t a, Py_ssize_t b, int32_t lo,
+                           int32_t hi) noexcept nogil:
+    """Any of ``order[a:b]`` outside ``[lo, hi)`` (a loop the compiler vectorises)."""
+    cdef Py_ssize_t i
+    cdef int bad = 0
+    for i in range(a, b):
+        bad |= (order[i] < lo) | (order[i] >= hi)
+    return bad
+
+
+cdef inline int32_t checked_ray(int32_t j, int32_t lo, int32_t hi, int32_t n, uint8_t *seen,
+                                int *bad) noexcept nogil:
+    """``j`` if it is a ray of the large packet ``[lo, hi)`` (within ``[0, n)``), else -1;
+    ``*bad`` set unless it is also seen for the first time (``seen``: n + 1 bytes, the
+    last a spare), which marks it."""
+    cdef int inside = (j >= lo) & (j < hi)
+    cdef int32_t slot = j if inside else n
+    bad[0] |= (not inside) | seen[slot]
+    seen[slot] = 1
+    return j if inside else -1
+
+
 cdef inline int sub_packet_bad(const int32_t *order, Py_ssize_t a, Py_ssize_t b,
                                const int32_t *packets, Py_ssize_t n_big, int32_t n,
                                Py_ssize_t *k_big, uint8_t *seen) noexcept nogil:
     """A sorter's sub-packet ``order[a:b]`` (a < b): rays of ``[0, n)``, all in one large
-    packet (``packets``: n_big + 1 valid boundaries; ``k_big`` the one of the previous
-    sub-packet, updated) and none seen before; marks them seen (``seen``: n + 1 bytes, the
-    last a spare)."""
+    packet and none seen before (see :func:`packet_bounds`, :func:`checked_ray`)."""
     cdef Py_ssize_t i
-    cdef int32_t j = order[a], lo, hi
-    cdef int bad = 0, inside
-    if j < 0 or j >= n:
+    cdef int32_t lo, hi
+    cdef int bad = 0
+    if packet_bounds(order[a], packets, n_big, n, k_big, &lo, &hi):
         return 1
-    if not (packets[k_big[0]] <= j < packets[k_big[0] + 1]):   # usually the same one
-        k_big[0] = large_packet(packets, n_big, j)
-    lo, hi = packets[k_big[0]], packets[k_big[0] + 1]
     for i in range(a, b):
-        j = order[i]
-        inside = (j >= lo) & (j < hi)
-        j = j if inside else n
-        bad |= (not inside) | seen[j]
-        seen[j] = 1
+        checked_ray(order[i], lo, hi, n, seen, &bad)
     return bad
 
 

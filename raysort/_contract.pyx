@@ -14,7 +14,7 @@ sort result) or int32/int64 index arrays (the caller converts other types).
 """
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t, uint64_t
 from libc.stdlib cimport calloc, free
-from libc.string cimport memset
+from libc.string cimport memcmp, memset
 from raysort._checks cimport (ray_bad, closest_bad, any_hit_bad, large_packet,
                               sub_packet_bad)
 from raysort._types cimport (RS_RAY_OX, RS_RAY_OY, RS_RAY_OZ, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ,
@@ -203,9 +203,7 @@ cdef int index_lanes_kernel(const int32_t *prim, const int32_t *index, const int
                     return BAD_PADDING
         lanes = index + s
         rays = order + (offsets[k] if k < n_sub else 0)
-        for j in range(c):
-            bad |= lanes[j] != rays[j]
-        if bad:
+        if c and memcmp(lanes, rays, c * sizeof(int32_t)):    # short runs: libc's compare
             for j in range(c):
                 if lanes[j] != rays[j]:
                     where[0] = s + j

@@ -26,6 +26,13 @@ class Counters:
     ``stream_tasks`` and ``stream_rays`` count the streams of rays a stream
     traversal visited nodes with and the rays they held (0 for the others):
     ``stream_rays / stream_tasks`` is the mean stream size.
+    ``stream_level_rays`` splits ``stream_rays`` by the depth in the tree of
+    the box each stream was popped at: entry ``d`` is the rays that entered
+    boxes of level ``d`` together (0: the root; as long as the deepest level
+    reached, ``()`` for the others).  Tuples of different lengths add up
+    entry by entry.  It is an attribute, not a dataclass field (the fields
+    are the whole-number counters the traversal contract checks); set it
+    after construction.
     """
 
     rays: int = 0
@@ -37,12 +44,14 @@ class Counters:
     stream_tasks: int = 0
     stream_rays: int = 0
     available: bool = True
+    stream_level_rays = ()      # not annotated: an attribute, see the docstring
 
     def __add__(self, other):
         if not isinstance(other, Counters):
             return NotImplemented
         out = Counters(**{f.name: getattr(self, f.name) + getattr(other, f.name)
                           for f in fields(self) if f.name != "available"})
+        out.stream_level_rays = _add_levels(self.stream_level_rays, other.stream_level_rays)
         out.available = self.available and other.available
         return out
 
@@ -54,4 +63,12 @@ class Counters:
         return {key: getattr(self, key) / rays for key in COUNTER_LABELS}
 
     def as_dict(self):
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out["stream_level_rays"] = list(self.stream_level_rays)
+        return out
+
+
+def _add_levels(a, b):
+    """Entry-by-entry sum of two per-level tuples, the shorter padded with zeros."""
+    n = max(len(a), len(b))
+    return tuple((a[k] if k < len(a) else 0) + (b[k] if k < len(b) else 0) for k in range(n))

@@ -29,7 +29,7 @@ Coordinates that are NaN map to 0 and everything is clamped to [0, 1], so no
 ray (NaN, infinite, zero direction) can make the kernel misbehave; the gather
 marks such rays inactive anyway.
 """
-from libc.math cimport INFINITY, copysignf, fabsf, sqrtf
+from libc.math cimport INFINITY, copysignf, fabsf
 from libc.stdint cimport int32_t, int64_t, uint32_t, uint64_t
 from libc.string cimport memset
 from raysort._types cimport rs_maxf, rs_minf
@@ -41,8 +41,10 @@ from raysort.sdk import MAX_PACKET, ConfigError, Sorter, boolean, check_packets,
 
 #: bits each coordinate is quantised to (a key table has two byte-tables per coordinate)
 COORD_BITS = 16
+cdef enum:
+    KEY_COORDS = 6          # most coordinates a key draws from
 #: most coordinates a key draws from
-MAX_COORDS = 6
+MAX_COORDS = KEY_COORDS
 
 # how the coordinates after the origin's three are made
 cdef enum:
@@ -56,91 +58,239 @@ COORDINATES = {"components": DIR_COMPONENTS, "octahedral": DIR_OCTAHEDRAL,
 # the end point is pulled this much inside the box it would leave (Meister's hippie does
 # the same), so that a ray ending on the far wall keeps its wall's cell
 cdef float EXIT_SHRINK = 1.0 - 1.0e-3
-cdef float QMAX = 65535.0   # 2**COORD_BITS - 1
 cdef float ONE = 1.0        # float constants: a bare 0.5 or 1.0 would make the C double
 cdef float HALF = 0.5
+cdef enum:
+    BLOCK = 256             # rays whose coordinates are computed together, loop by loop
 #: bits of the octant prefix (the signs of dx, dy, dz)
 OCTANT_BITS = 3
 
 
-cdef inline float unit(float x) noexcept nogil:
-    """x clamped to [0, 1]; NaN -> 0 (MAXSS/MINSS semantics: no branch)."""
-    return rs_minf(rs_maxf(x, 0), 1)
+cdef extern from *:
+    """
+    #include "raysort/simd.h"
+    /* c ? a : b, as a select the compiler vectorises (a Cython conditional is a branch) */
+    static inline float rs_keysort_pick(int c, float a, float b) { return c ? a : b; }
+    /* out[j] = 1 / sqrt(x[j]), four at a time where SSE is there: a loop of sqrtf calls
+     * does not vectorise (errno), and SQRTPS rounds exactly as sqrtf does */
+    static inline void rs_keysort_inv_sqrt(const float *x, float *out, int m)
+    {
+        int j = 0;
+    #if RS_SSE
+        for (; j + 4 <= m; j += 4)
+            _mm_storeu_ps(out + j, _mm_div_ps(_mm_set1_ps(1.0f), _mm_sqrt_ps(_mm_loadu_ps(x + j))));
+    #endif
+        for (; j < m; ++j)
+            out[j] = 1.0f / sqrtf(x[j]);
+    }
+    /* q[j] = (int)(min(max(c[j], 0), 1) * 65535): a coordinate clamped to [0, 1] (NaN
+     * -> 0) and quantised to 16 bits (COORD_BITS: 65535 = 2^16 - 1).  MAXPS/MINPS return the second operand on NaN,
+     * as rs_maxf/rs_minf do, so every ISA gives the same q; written with intrinsics
+     * because the compiler leaves the branchy scalar form unvectorised. */
+    static inline void rs_keysort_quantise(const float *c, int32_t *q, int m)
+    {
+        int j = 0;
+    #if RS_SSE
+        const __m128 zero = _mm_setzero_ps(), one = _mm_set1_ps(1.0f), qmax = _mm_set1_ps(65535.0f);
+        for (; j + 4 <= m; j += 4) {
+            __m128 x = _mm_min_ps(_mm_max_ps(_mm_loadu_ps(c + j), zero), one);
+            _mm_storeu_si128((__m128i *)(q + j), _mm_cvttps_epi32(_mm_mul_ps(x, qmax)));
+        }
+    #endif
+        for (; j < m; ++j)
+            q[j] = (int32_t)(rs_minf(rs_maxf(c[j], 0.0f), 1.0f) * 65535.0f);
+    }
+    """
+    float pick "rs_keysort_pick"(bint c, float a, float b) noexcept nogil
+    void inv_sqrt "rs_keysort_inv_sqrt"(const float *x, float *out, int m) noexcept nogil
+    void quantise "rs_keysort_quantise"(const float *c, int32_t *q, int m) noexcept nogil
 
 
-cdef inline uint32_t quantise(float x) noexcept nogil:
-    return <uint32_t> (unit(x) * QMAX)
+cdef struct KeyInputs:
+    # the rays' rows, the scene box and the key's recipe: what ray_keys reads
+    const float *o[3]
+    const float *d[3]
+    const float *tmax
+    const float *prev_t         # NULL: no previous hit distances
+    int mode                    # a value of COORDINATES
+    float lo[3]
+    float hi[3]
+    float scale[3]              # 1 / box extent, 0 on a flat axis
+    float length
+    float prev_scale
+    const uint64_t *table       # (MAX_COORDS, 2, 256) from key_table
+    bint low_bytes              # the table uses the low byte of some coordinate
+    bint octant
 
 
-cdef void ray_keys(const float *ox, const float *oy, const float *oz, const float *dx,
-                   const float *dy, const float *dz, const float *tmax, const float *prev_t,
-                   int n, int mode, const float *lo, const float *hi, const float *scale,
-                   float length, float prev_scale, const uint64_t *table, bint low_bytes,
-                   bint octant, uint64_t *keys) noexcept nogil:
-    """The key of rays [0, n).  The float work is branch free (min/max and selects by
-    multiplication): diffuse directions would mispredict a branch on a sign half the
-    time, which costs more than all the arithmetic."""
-    cdef int i, k, n_coords = 5 if mode == DIR_OCTAHEDRAL else 6
-    cdef float o[3]
-    cdef float d[3]
-    cdef float c[6]
-    cdef float inv, s, L, p, ex, u, v, fu, fv, below, r
-    cdef uint32_t q
-    cdef uint64_t key
-    for i in range(n):
-        o[0] = ox[i]
-        o[1] = oy[i]
-        o[2] = oz[i]
-        # d / |d| (inf or NaN for a zero or non-finite direction: its key is then arbitrary);
+cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept nogil:
+    """The coordinates of rays [b, b + m) (m <= BLOCK) into c[k * BLOCK + j].
+
+    One simple loop per step, without branches, so the compiler vectorises
+    them; every ray gets the same IEEE operations in the same order whatever
+    the ISA, so keys are the same on every build."""
+    cdef int j, k
+    cdef float inv[BLOCK]
+    cdef float ell[BLOCK]
+    cdef float u, v, s, below, L, p, t, ex, r, lo, hi, scale
+    # everything the loops read in locals: a store to c could alias *a, which would
+    # keep the compiler from vectorising
+    cdef const float *dx = a.d[0] + b
+    cdef const float *dy = a.d[1] + b
+    cdef const float *dz = a.d[2] + b
+    cdef const float *o
+    cdef const float *d
+    cdef float *out
+    for k in range(3):
+        o, out, lo, scale = a.o[k] + b, c + k * BLOCK, a.lo[k], a.scale[k]
+        for j in range(m):
+            out[j] = (o[j] - lo) * scale
+    if a.mode == DIR_OCTAHEDRAL:
         # the octahedral map divides by |d|_1 itself and needs no unit vector
-        inv = ONE if mode == DIR_OCTAHEDRAL else ONE / sqrtf(dx[i] * dx[i] + dy[i] * dy[i]
-                                                              + dz[i] * dz[i])
-        d[0] = dx[i] * inv
-        d[1] = dy[i] * inv
-        d[2] = dz[i] * inv
-        for k in range(3):
-            c[k] = (o[k] - lo[k]) * scale[k]
-        if mode == DIR_COMPONENTS:
-            for k in range(3):
-                c[3 + k] = HALF * d[k] + HALF
-        elif mode == DIR_OCTAHEDRAL:
-            s = ONE / (fabsf(d[0]) + fabsf(d[1]) + fabsf(d[2]))
-            u = d[0] * s
-            v = d[1] * s
+        for j in range(m):
+            s = ONE / (fabsf(dx[j]) + fabsf(dy[j]) + fabsf(dz[j]))
+            u = dx[j] * s
+            v = dy[j] * s
             # the lower hemisphere (below = 1) folds over the diagonals
-            fu = copysignf(ONE - fabsf(v), u)
-            fv = copysignf(ONE - fabsf(u), v)
-            below = <float> (d[2] < 0)
-            c[3] = HALF * (u + below * (fu - u)) + HALF
-            c[4] = HALF * (v + below * (fv - v)) + HALF
-        else:
-            L = length
-            if prev_t != NULL:
-                p = prev_t[i]
-                if p > 0 and p < INFINITY:
-                    L = p * prev_scale
-            if not tmax[i] >= L:    # also when tmax is NaN or negative
-                L = tmax[i] if tmax[i] > 0 else 0
-            # where the ray leaves the scene box (for an origin inside it), pulled in a little
-            ex = INFINITY
-            for k in range(3):
-                r = ONE / d[k]
-                ex = rs_minf(ex, rs_maxf((lo[k] - o[k]) * r, (hi[k] - o[k]) * r))
-            L = rs_minf(rs_maxf(ex * EXIT_SHRINK, 0), L)
-            for k in range(3):
-                c[3 + k] = (o[k] + L * d[k] - lo[k]) * scale[k]
-        key = 0
-        if low_bytes:
+            below = <float> (dz[j] < 0)
+            c[3 * BLOCK + j] = HALF * (u + below * (copysignf(ONE - fabsf(v), u) - u)) + HALF
+            c[4 * BLOCK + j] = HALF * (v + below * (copysignf(ONE - fabsf(u), v) - v)) + HALF
+        return
+    # d / |d| (inf or NaN for a zero or non-finite direction: its key is then arbitrary)
+    for j in range(m):
+        inv[j] = dx[j] * dx[j] + dy[j] * dy[j] + dz[j] * dz[j]
+    inv_sqrt(inv, inv, m)
+    if a.mode == DIR_COMPONENTS:
+        for k in range(3):
+            d, out = a.d[k] + b, c + (3 + k) * BLOCK
+            for j in range(m):
+                out[j] = HALF * (d[j] * inv[j]) + HALF
+        return
+    # END_POINT: o + L d/|d|, L the estimated length clamped to tmax and the box exit
+    for j in range(m):
+        ell[j] = a.length
+    if a.prev_t != NULL:
+        for j in range(m):
+            p = a.prev_t[b + j]
+            ell[j] = pick((p > 0) & (p < INFINITY), p * a.prev_scale, ell[j])
+    for j in range(m):
+        t = a.tmax[b + j]
+        L = pick(t >= ell[j], ell[j], rs_maxf(t, 0))   # also when tmax is NaN or negative
+        # where the ray leaves the scene box (for an origin inside it), pulled in a little
+        ex = INFINITY
+        for k in range(3):
+            r = ONE / (a.d[k][b + j] * inv[j])
+            ex = rs_minf(ex, rs_maxf((a.lo[k] - a.o[k][b + j]) * r,
+                                     (a.hi[k] - a.o[k][b + j]) * r))
+        ell[j] = rs_minf(rs_maxf(ex * EXIT_SHRINK, 0), L)
+    for k in range(3):
+        o, d, out, lo, scale = a.o[k] + b, a.d[k] + b, c + (3 + k) * BLOCK, a.lo[k], a.scale[k]
+        for j in range(m):
+            out[j] = (o[j] + ell[j] * (d[j] * inv[j]) - lo) * scale
+
+
+cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcept nogil:
+    """The keys of rays [start, start + n) into keys[0, n), BLOCK rays at a time."""
+    cdef int b, j, k, m, n_coords = 5 if a.mode == DIR_OCTAHEDRAL else 6
+    cdef float c[KEY_COORDS * BLOCK]
+    cdef int32_t q[KEY_COORDS * BLOCK]
+    cdef uint64_t *kb
+    cdef const uint64_t *table = a.table
+    b = start
+    while b < start + n:
+        m = min(<int> BLOCK, start + n - b)
+        block_coordinates(a, b, m, c)
+        for k in range(n_coords):
+            quantise(&c[k * BLOCK], &q[k * BLOCK], m)
+        # the key is the OR of one table entry per byte of each quantised coordinate
+        kb = keys + (b - start)
+        if not a.low_bytes and n_coords == 6:   # the common short key: one loop, no stores
+            for j in range(m):
+                kb[j] = (table[1 * 256 + (q[0 * BLOCK + j] >> 8)]
+                         | table[3 * 256 + (q[1 * BLOCK + j] >> 8)]
+                         | table[5 * 256 + (q[2 * BLOCK + j] >> 8)]
+                         | table[7 * 256 + (q[3 * BLOCK + j] >> 8)]
+                         | table[9 * 256 + (q[4 * BLOCK + j] >> 8)]
+                         | table[11 * 256 + (q[5 * BLOCK + j] >> 8)])
+        elif not a.low_bytes:
+            for j in range(m):
+                kb[j] = (table[1 * 256 + (q[0 * BLOCK + j] >> 8)]
+                         | table[3 * 256 + (q[1 * BLOCK + j] >> 8)]
+                         | table[5 * 256 + (q[2 * BLOCK + j] >> 8)]
+                         | table[7 * 256 + (q[3 * BLOCK + j] >> 8)]
+                         | table[9 * 256 + (q[4 * BLOCK + j] >> 8)])
+        else:                   # a long key: both bytes of every coordinate
+            for j in range(m):
+                kb[j] = 0
             for k in range(n_coords):
-                q = quantise(c[k])
-                key |= table[(2 * k) * 256 + (q & 255)] | table[(2 * k + 1) * 256 + (q >> 8)]
-        else:                       # a short key uses only the top byte of every coordinate
-            for k in range(n_coords):
-                key |= table[(2 * k + 1) * 256 + (quantise(c[k]) >> 8)]
-        if octant:                  # the direction's octant first (bit k: d[k] < 0)
-            key = (key >> 3 | <uint64_t> (dx[i] < 0) << 63 | <uint64_t> (dy[i] < 0) << 62
-                   | <uint64_t> (dz[i] < 0) << 61)
-        keys[i] = key
+                for j in range(m):
+                    kb[j] |= (table[(2 * k) * 256 + (q[k * BLOCK + j] & 255)]
+                              | table[(2 * k + 1) * 256 + (q[k * BLOCK + j] >> 8)])
+        if a.octant:            # the direction's octant first (bit k: d[k] < 0)
+            for j in range(m):
+                kb[j] = (kb[j] >> 3 | <uint64_t> (a.d[0][b + j] < 0) << 63
+                         | <uint64_t> (a.d[1][b + j] < 0) << 62
+                         | <uint64_t> (a.d[2][b + j] < 0) << 61)
+        b += m
+
+
+cdef class _Inputs:
+    """A :c:type:`KeyInputs` and the arrays it points into (kept alive with it)."""
+    cdef KeyInputs a
+    cdef object keep
+    cdef readonly int n
+
+
+def _inputs(rays, str coordinates, bounds, const uint64_t[:, :, ::1] table, float length,
+            prev_t, float prev_scale, bint octant):
+    """Check the arguments of :func:`make_keys` and :func:`sort_rays` into an :class:`_Inputs`."""
+    cdef _Inputs out = _Inputs()
+    cdef int n = len(rays), k
+    if coordinates not in COORDINATES:
+        raise ValueError(f"coordinates must be one of {', '.join(COORDINATES)}; "
+                         f"got {coordinates!r}")
+    if table.shape[0] != MAX_COORDS or table.shape[1] != 2 or table.shape[2] != 256:
+        raise ValueError(f"a key table has shape ({MAX_COORDS}, 2, 256), got "
+                         f"{(table.shape[0], table.shape[1], table.shape[2])}")
+    box = np.asarray(bounds, dtype=np.float32).reshape(2, 3)
+    extent = box[1] - box[0]
+    # 1 / extent, 0 on a flat (or inverted, or non-finite) axis: it carries no order
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.where(extent > 0, np.float32(1) / extent, 0).astype(np.float32)
+    inv[~np.isfinite(inv)] = 0
+    o, d = rays.origins, rays.directions
+    cdef const float[::1] row
+    rows = [np.ascontiguousarray(o[k]) for k in range(3)] + \
+        [np.ascontiguousarray(d[k]) for k in range(3)] + [np.ascontiguousarray(rays.tmax)]
+    if prev_t is not None:
+        prev_t = np.ascontiguousarray(prev_t, dtype=np.float32)
+        if prev_t.shape != (n,):
+            raise ConfigError(f"rays.prev_t has {prev_t.size} values for {n} rays")
+    out.keep = (rows, prev_t, table)
+    out.n = n
+    if n == 0:
+        return out
+    for k in range(3):
+        row = rows[k]
+        out.a.o[k] = &row[0]
+        row = rows[3 + k]
+        out.a.d[k] = &row[0]
+        out.a.lo[k] = box[0, k]
+        out.a.hi[k] = box[1, k]
+        out.a.scale[k] = inv[k]
+    row = rows[6]
+    out.a.tmax = &row[0]
+    out.a.prev_t = NULL
+    if prev_t is not None:
+        row = prev_t
+        out.a.prev_t = &row[0]
+    out.a.mode = COORDINATES[coordinates]
+    out.a.length = length
+    out.a.prev_scale = prev_scale
+    out.a.table = &table[0, 0, 0]
+    out.a.low_bytes = bool(np.asarray(table)[:, 0].any())
+    out.a.octant = octant
+    return out
 
 
 def make_keys(rays, str coordinates, bounds, const uint64_t[:, :, ::1] table, *,
@@ -153,38 +303,13 @@ def make_keys(rays, str coordinates, bounds, const uint64_t[:, :, ::1] table, *,
     number, which otherwise gives ``prev_t * prev_scale``; ``octant``: the top
     :data:`OCTANT_BITS` bits are the signs of the direction, the table's key follows.
     """
-    cdef int n = len(rays), mode = COORDINATES[coordinates]
-    box = np.asarray(bounds, dtype=np.float32)
-    extent = box[1] - box[0]
-    cdef float[::1] lo = np.ascontiguousarray(box[0])
-    cdef float[::1] hi = np.ascontiguousarray(box[1])
-    # 1 / extent, 0 on a flat (or inverted, or non-finite) axis: it carries no order
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = np.where(extent > 0, np.float32(1) / extent, 0).astype(np.float32)
-    inv[~np.isfinite(inv)] = 0
-    cdef float[::1] scale = inv
-    out = np.empty(n, dtype=np.uint64)
-    if n == 0:
-        return out
-    o, d = rays.origins, rays.directions
-    cdef const float[::1] ox = o[0], oy = o[1], oz = o[2]
-    cdef const float[::1] dx = d[0], dy = d[1], dz = d[2]
-    cdef const float[::1] tmax = rays.tmax
-    cdef const float[::1] prev = None
-    if prev_t is not None:
-        prev = np.ascontiguousarray(prev_t, dtype=np.float32)
-        if prev.shape[0] != n:
-            raise ConfigError(f"rays.prev_t has {prev.shape[0]} values for {n} rays")
+    cdef _Inputs inputs = _inputs(rays, coordinates, bounds, table, length, prev_t,
+                                  prev_scale, octant)
+    out = np.empty(inputs.n, dtype=np.uint64)
     cdef uint64_t[::1] keys = out
-    cdef const float *prev_ptr = &prev[0] if prev is not None else NULL
-    if table.shape[0] != MAX_COORDS or table.shape[1] != 2 or table.shape[2] != 256:
-        raise ValueError(f"a key table has shape ({MAX_COORDS}, 2, 256), got "
-                         f"{(table.shape[0], table.shape[1], table.shape[2])}")
-    cdef bint low_bytes = bool(np.asarray(table)[:, 0].any())
-    with nogil:
-        ray_keys(&ox[0], &oy[0], &oz[0], &dx[0], &dy[0], &dz[0], &tmax[0], prev_ptr, n, mode,
-                 &lo[0], &hi[0], &scale[0], length, prev_scale, &table[0, 0, 0], low_bytes, octant,
-                 &keys[0])
+    if inputs.n:
+        with nogil:
+            ray_keys(&inputs.a, 0, inputs.n, &keys[0])
     return out
 
 
@@ -221,11 +346,13 @@ def key_table(levels):
 # sorting
 
 cdef int radix_sort(uint64_t *key, int32_t *item, uint64_t *key_tmp, int32_t *item_tmp,
-                    int n, int digits) noexcept nogil:
-    """Stable LSD radix sort of (key, item) by the top ``digits`` bytes of key.
+                    int n, int digits, int32_t (*count)[256]) noexcept nogil:
+    """Stable LSD radix sort of (key, item) by the top ``digits`` bytes of key; item
+    may be NULL (the item is then in the key's low bits, which no pass looks at).
+    ``count[j]`` holds the histogram of byte j (from the top) of the keys; the sort
+    uses it up.
 
     Returns 1 when the result is in the tmp arrays, 0 when in key/item."""
-    cdef int32_t count[8][256]
     cdef int i, j, shift, flip = 0
     cdef int32_t pos, c
     cdef uint64_t *ks = key
@@ -234,10 +361,7 @@ cdef int radix_sort(uint64_t *key, int32_t *item, uint64_t *key_tmp, int32_t *it
     cdef int32_t *id_ = item_tmp
     cdef uint64_t *kt
     cdef int32_t *it
-    memset(count, 0, digits * sizeof(count[0]))
-    for i in range(n):
-        for j in range(digits):
-            count[j][(key[i] >> (56 - 8 * j)) & 255] += 1
+    cdef uint64_t k
     for j in range(digits - 1, -1, -1):
         shift = 56 - 8 * j
         if count[j][(key[0] >> shift) & 255] == n:
@@ -247,17 +371,25 @@ cdef int radix_sort(uint64_t *key, int32_t *item, uint64_t *key_tmp, int32_t *it
             c = count[j][i]
             count[j][i] = pos
             pos += c
-        for i in range(n):
-            c = count[j][(ks[i] >> shift) & 255]
-            count[j][(ks[i] >> shift) & 255] = c + 1
-            kd[c] = ks[i]
-            id_[c] = is_[i]
+        if item == NULL:
+            for i in range(n):
+                k = ks[i]
+                c = count[j][(k >> shift) & 255]
+                count[j][(k >> shift) & 255] = c + 1
+                kd[c] = k
+        else:
+            for i in range(n):
+                k = ks[i]
+                c = count[j][(k >> shift) & 255]
+                count[j][(k >> shift) & 255] = c + 1
+                kd[c] = k
+                id_[c] = is_[i]
+            it = is_
+            is_ = id_
+            id_ = it
         kt = ks
         ks = kd
         kd = kt
-        it = is_
-        is_ = id_
-        id_ = it
         flip ^= 1
     return flip
 
@@ -266,53 +398,98 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
                      int packet_size, int split_bits, int32_t *order, int32_t *offsets,
                      uint64_t *ckey, int32_t *citem, uint64_t *ckey_tmp, int32_t *citem_tmp,
                      int32_t *cstart, uint64_t *skey) noexcept nogil:
-    """Sort rays [start, end) by key into order[start:end]; write sub-packet starts to
-    offsets and return their number.  Work buffers hold end - start (+1) items."""
-    cdef int i, j, c, nc = 0, pos, last, flip, first
-    cdef uint64_t mask
+    """Sort rays [start, end), whose keys are keys[0, end - start), into
+    order[start:end]; write sub-packet starts to offsets and return their number.
+    Work buffers hold end - start (+1) items."""
+    cdef int i, j, c, nc = 0, pos, last, flip
+    cdef uint64_t mask, low, key, prev = 0
     cdef uint64_t *sk
     cdef int32_t *si
-    # chunks: every ray, or (compress) every run of equal keys in input order
-    for i in range(start, end):
-        if not compress or i == start or keys[i] != keys[i - 1]:
-            ckey[nc] = keys[i]
-            citem[nc] = nc
-            cstart[nc] = i
-            nc += 1
-    cstart[nc] = end
-    flip = radix_sort(ckey, citem, ckey_tmp, citem_tmp, nc, digits)
+    # a chunk is every ray, or (compress) every run of equal keys in input order
+    cdef int n = end - start, bits = 8 * digits
+    # the chunk's index goes into the key's low bits, which the sort does not look at,
+    # when they have room for it (so one array moves instead of two); the index is in
+    # input order, so the sort stays stable
+    cdef bint packed = bits <= 48 and split_bits <= bits and n <= (<int64_t> 1) << (64 - bits)
+    cdef int32_t *items = NULL if packed else citem
+    mask = (~(<uint64_t> 0) << (64 - bits)) if bits < 64 else ~(<uint64_t> 0)
+    low = ~mask
+    cdef int32_t count[8][256]
+    cdef bint simple = packed and not compress
+    memset(count, 0, max(digits, 3) * sizeof(count[0]))
+    # chunks and the radix sort's histograms, in one pass (keys may be ckey itself:
+    # chunk nc <= ray i is written after ray i is read)
+    if simple:                      # the common case, in one tight loop
+        for i in range(n):
+            key = keys[i]
+            ckey[i] = (key & mask) | <uint64_t> i
+            count[0][key >> 56] += 1
+            count[1][(key >> 48) & 255] += digits > 1
+            count[2][(key >> 40) & 255] += digits > 2
+            for j in range(3, digits):
+                count[j][(key >> (56 - 8 * j)) & 255] += 1
+        nc = n
+    else:
+        for i in range(n):
+            key = keys[i]
+            if not compress or i == 0 or key != prev:
+                if packed:
+                    ckey[nc] = (key & mask) | <uint64_t> nc
+                else:
+                    ckey[nc] = key
+                    citem[nc] = nc
+                cstart[nc] = start + i
+                nc += 1
+                for j in range(digits):
+                    count[j][(key >> (56 - 8 * j)) & 255] += 1
+            prev = key
+        cstart[nc] = end
+    flip = radix_sort(ckey, items, ckey_tmp, citem_tmp, nc, digits, count)
     sk = ckey_tmp if flip else ckey
     si = citem_tmp if flip else citem
-    # decompress: each chunk's rays, in input order, at the chunk's sorted place
-    pos = start
-    for j in range(nc):
-        c = si[j]
-        for i in range(cstart[c], cstart[c + 1]):
-            order[pos] = i
-            skey[pos - start] = sk[j]
-            pos += 1
+    if simple:
+        for j in range(nc):
+            order[start + j] = start + <int> (sk[j] & low)
+    elif compress:
+        # decompress: each chunk's rays, in input order, at the chunk's sorted place
+        pos = start
+        for j in range(nc):
+            c = <int> (sk[j] & low) if packed else si[j]
+            for i in range(cstart[c], cstart[c + 1]):
+                order[pos] = i
+                skey[pos - start] = sk[j]
+                pos += 1
+        sk = skey
+    else:
+        for j in range(nc):
+            order[start + j] = start + si[j]
     # sub-packets: at most packet_size rays, and a new one where the key's top bits change
     mask = 0 if split_bits == 0 else ~(<uint64_t> 0) << (64 - split_bits)
     c = 0
     last = start
     for pos in range(start, end):
         if (pos == start or pos - last == packet_size
-                or (skey[pos - start] ^ skey[pos - start - 1]) & mask):
+                or (sk[pos - start] ^ sk[pos - start - 1]) & mask):
             offsets[c] = pos
             c += 1
             last = pos
     return c
 
 
-def sort_keys(const uint64_t[::1] keys, const int32_t[::1] packets, int digits, *,
-              bint compress=False, int packet_size=64, int split_bits=0):
-    """``(order, offsets)``: rays sorted by key within each large packet (see the module
-    docstring); ``digits`` = how many top bytes of the key are sorted (1..8)."""
-    cdef int n = keys.shape[0], n_packets = packets.shape[0] - 1, p, n_sub = 0, widest = 1
+cdef object sort_packets(const KeyInputs *a, const uint64_t *keys, const int32_t[::1] packets,
+                         int n, int digits, bint compress, int packet_size, int split_bits):
+    """``(order, offsets)`` of every large packet, from ``keys`` or, when ``a`` is not
+    NULL, from keys computed packet by packet just before the packet is sorted (they
+    are still in the cache then)."""
+    cdef int n_packets = packets.shape[0] - 1, p, n_sub = 0, widest = 1
     if not 1 <= digits <= 8 or not 1 <= packet_size or not 0 <= split_bits <= 64:
         raise ValueError(f"digits 1..8, packet_size >= 1, split_bits 0..64; got {digits}, "
                          f"{packet_size}, {split_bits}")
+    if n_packets < 0 or packets[0] != 0 or packets[n_packets] != n:
+        raise ValueError(f"large packets must start at 0 and end at the {n} rays")
     for p in range(n_packets):
+        if packets[p + 1] < packets[p]:
+            raise ValueError(f"large packet {p} ends before it starts")
         widest = max(widest, packets[p + 1] - packets[p])
     order = np.empty(max(n, 1), dtype=np.int32)
     offsets = np.empty(n + 1, dtype=np.int32)
@@ -321,16 +498,41 @@ def sort_keys(const uint64_t[::1] keys, const int32_t[::1] packets, int digits, 
     cdef uint64_t[::1] skey = np.empty(widest, np.uint64)
     cdef int32_t[::1] citem = np.empty(widest, np.int32), citem_tmp = np.empty(widest, np.int32)
     cdef int32_t[::1] cstart = np.empty(widest + 1, np.int32)
-    cdef const uint64_t *kp = &keys[0] if n else NULL
+    cdef const uint64_t *kp
     with nogil:
         for p in range(n_packets):
             if packets[p + 1] > packets[p]:
+                if a != NULL:       # sort_packet reads the keys from its own work buffer
+                    ray_keys(a, packets[p], packets[p + 1] - packets[p], &ckey[0])
+                    kp = &ckey[0]
+                else:
+                    kp = keys + packets[p]
                 n_sub += sort_packet(kp, packets[p], packets[p + 1], digits, compress,
                                      packet_size, split_bits, &order_mv[0], &offsets_mv[n_sub],
                                      &ckey[0], &citem[0], &ckey_tmp[0], &citem_tmp[0],
                                      &cstart[0], &skey[0])
     offsets_mv[n_sub] = n
     return order[:n], offsets[:n_sub + 1].copy()
+
+
+def sort_keys(const uint64_t[::1] keys, const int32_t[::1] packets, int digits, *,
+              bint compress=False, int packet_size=64, int split_bits=0):
+    """``(order, offsets)``: rays sorted by key within each large packet (see the module
+    docstring); ``digits`` = how many top bytes of the key are sorted (1..8)."""
+    return sort_packets(NULL, &keys[0] if keys.shape[0] else NULL, packets, keys.shape[0],
+                        digits, compress, packet_size, split_bits)
+
+
+def sort_rays(rays, str coordinates, bounds, const uint64_t[:, :, ::1] table,
+              const int32_t[::1] packets, int digits, *, float length=0, prev_t=None,
+              float prev_scale=1, bint octant=False, bint compress=False, int packet_size=64,
+              int split_bits=0):
+    """:func:`sort_keys` of the keys :func:`make_keys` gives (the same order and
+    offsets), each large packet's keys made just before it is sorted."""
+    cdef _Inputs inputs = _inputs(rays, coordinates, bounds, table, length, prev_t,
+                                  prev_scale, octant)
+    return sort_packets(&inputs.a, NULL, packets, inputs.n, digits, compress, packet_size,
+                        split_bits)
 
 
 # ---------------------------------------------------------------------------------------
@@ -377,9 +579,10 @@ class KeySorter(Sorter):
 
     def sort(self, rays, packets, bounds):
         packets = check_packets(packets, len(rays))
-        bounds = np.asarray(bounds, dtype=np.float32).reshape(2, 3)
-        return isa.module("sorters._keysort").sort_keys(
-            self.keys(rays, bounds), packets, self._digits, compress=self.compress,
+        length, prev_t, prev_scale = self.end_length(rays, bounds)
+        return isa.module("sorters._keysort").sort_rays(
+            rays, self.coordinates, bounds, self._table, packets, self._digits, length=length,
+            prev_t=prev_t, prev_scale=prev_scale, octant=self.octant, compress=self.compress,
             packet_size=self.packet_size, split_bits=self._split)
 
 

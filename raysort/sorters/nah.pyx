@@ -16,7 +16,7 @@ NaN are false), so the sorter never fails on them; the gather marks them
 inactive.
 """
 from libc.stdint cimport int32_t, uint8_t
-from libc.math cimport INFINITY, fabs
+from libc.math cimport INFINITY, fabsf
 from raysort._types cimport rs_minf, rs_maxf, RS_RAY_OX, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ
 
 import numpy as np
@@ -30,16 +30,16 @@ cdef enum:
 
 
 cdef inline int direction_bucket(float dx, float dy, float dz) noexcept nogil:
-    """octant * 3 + major axis; octant bit k is set when component k is negative."""
+    """octant * 3 + major axis; octant bit k is set when component k is negative.
+
+    The major axis is the first of the largest |components| (y beats x only when
+    larger, z beats the larger of them only when larger), chosen without branches:
+    for diffuse rays a branch on it would mispredict every other ray."""
     cdef int octant = (dx < 0) | (dy < 0) << 1 | (dz < 0) << 2
-    cdef float ax = fabs(dx), ay = fabs(dy), az = fabs(dz), best = ax
-    cdef int major = 0
-    if ay > best:
-        major = 1
-        best = ay
-    if az > best:
-        major = 2
-    return octant * 3 + major
+    cdef float ax = fabsf(dx), ay = fabsf(dy), az = fabsf(dz)
+    cdef int y_wins = ay > ax
+    cdef int z_wins = az > rs_maxf(ay, ax)      # rs_maxf(ay, ax) = ay > ax ? ay : ax
+    return octant * 3 + y_wins + z_wins * (2 - y_wins)
 
 
 cdef void split_axes(const float *lo, const float *hi, const float *root_extent,
@@ -69,12 +69,12 @@ cdef void split_axes(const float *lo, const float *hi, const float *root_extent,
 
 cdef inline int grid_cell(const float[:, ::1] rays, int i, uint8_t axes,
                           const float *mid) noexcept nogil:
-    cdef int a, cell = 0, bit = 0
+    """One bit per split axis (in axis order): the origin is at or above the middle."""
+    cdef int a, split, cell = 0, bit = 0
     for a in range(3):
-        if axes >> a & 1:
-            if rays[RS_RAY_OX + a, i] >= mid[a]:
-                cell |= 1 << bit
-            bit += 1
+        split = axes >> a & 1
+        cell |= ((rays[RS_RAY_OX + a, i] >= mid[a]) & split) << bit
+        bit += split
     return cell
 
 

@@ -17,7 +17,7 @@ streams of ``stream_size`` rays.  Sub-packet boundaries do not matter; a
 sorter helps through the order (neighbouring rays share nodes and leaves,
 so streams stay large deeper in the tree).
 """
-from libc.stdint cimport int32_t, uint8_t
+from libc.stdint cimport int32_t, int64_t, uint8_t
 from raysort._types cimport rs_node4, rs_tri, rs_rays, rs_counters, rays_view
 
 from raysort import isa
@@ -29,6 +29,8 @@ cdef extern from "raysort/stream.h" nogil:
     enum: RS_ORDER_DIRECTION, RS_ORDER_VOTES
     ctypedef struct rs_stream_scratch:
         int32_t *ids
+        int64_t *level_rays
+        int depth
     int rs_stream_alloc(rs_stream_scratch *w, int size, int depth)
     void rs_stream_free(rs_stream_scratch *w)
     void rs_stream_trace(const rs_node4 *nodes, const rs_tri *tris, rs_rays *r, int n,
@@ -51,7 +53,7 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
     """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa)."""
     cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
     cdef int capacity = packets.capacity, n_packets = starts.shape[0]
-    cdef int k, i, m, size, ok
+    cdef int k, i, m, size, ok, levels
     cdef long long active = 0
     for k in range(n_packets):
         if starts[k] < 0 or counts[k] < 0 or <long long> starts[k] + counts[k] > capacity:
@@ -93,10 +95,16 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
                             m = 0
             if m:
                 rs_stream_trace(nodes, tris, &rays, m, any_hit, order, min_stream, &w, &c)
+        levels = w.depth + 1
+        while levels > 0 and w.level_rays[levels - 1] == 0:
+            levels -= 1
+        level_rays = tuple([w.level_rays[k] for k in range(levels)])
     finally:
         rs_stream_free(&w)
-    return Counters(rays=active, box1=c.box1, box4=c.box4, tri1=c.tri1, tri4=c.tri4,
-                    stream_tasks=c.stream_tasks, stream_rays=c.stream_rays)
+    out = Counters(rays=active, box1=c.box1, box4=c.box4, tri1=c.tri1, tri4=c.tri4,
+                   stream_tasks=c.stream_tasks, stream_rays=c.stream_rays)
+    out.stream_level_rays = level_rays
+    return out
 
 
 class StreamTraversal(Traversal):
@@ -113,7 +121,9 @@ class StreamTraversal(Traversal):
     Counters (the same on every ISA): SIMD N_B is one per ray and node it
     visits (four child boxes, as ``wide``), SIMD N_T one per triangle and 4
     rays (rounded up) of a leaf's stream; the single-ray finish counts as
-    ``wide``.  ``stream_tasks`` / ``stream_rays`` give the mean stream size.
+    ``wide``.  ``stream_tasks`` / ``stream_rays`` give the mean stream size;
+    ``stream_level_rays[d]`` counts the rays of the streams popped at depth ``d``
+    of the 4-wide tree (0: the root; a leaf is one level below its node).
 
     ===========  ======  ==========  ========================================
     parameter    type    default     meaning

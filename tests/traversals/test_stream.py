@@ -11,8 +11,9 @@ import pytest
 import raysort
 from raysort import isa
 from raysort.bvh import BVH
-from raysort.rays import RayBatch, gather, scatter, scatter_occluded
+from raysort.rays import PacketRow, RayBatch, gather, scatter, scatter_occluded
 from raysort.reference import brute_force
+from raysort.stats import Counters
 
 from _helpers import assert_same_hits, random_rays
 
@@ -173,6 +174,83 @@ def test_stream_counters(soup):
     assert mixed.tri1 > 0 and mixed.stream_tasks < one.stream_tasks
 
 
+def level_rays_by_python(bvh, packets):
+    """Rays that enter each level of ``bvh.wide`` when nothing is ever hit, by a walk in
+    NumPy: a box's rays are those of its parent that pass the slab test against it (float32,
+    the kernel's operations and its 2^-14 slack), the root's are all rays."""
+    rows = packets.rows
+    o = [rows[int(PacketRow.ox) + a, :len(packets.index)] for a in range(3)]
+    inv = [rows[int(PacketRow.ix) + a, :len(packets.index)] for a in range(3)]
+    tmin, tmax = rows[int(PacketRow.tmin)], rows[int(PacketRow.t)]
+    active = np.flatnonzero(tmin[:len(packets.index)] < tmax[:len(packets.index)])
+    nodes, slack = bvh.wide, F32(1 + 2.0 ** -14)
+    levels = {}
+
+    def visit(node, ids, level):
+        levels[level] = levels.get(level, 0) + len(ids)
+        if node < 0:
+            return
+        box = nodes[node]
+        for k in range(4):
+            if not box["lo"][0][k] <= box["hi"][0][k]:        # an empty slot
+                continue
+            tn, tf = tmin[ids], tmax[ids]
+            for a in range(3):
+                t_lo = (box["lo"][a][k] - o[a][ids]) * inv[a][ids]
+                t_hi = (box["hi"][a][k] - o[a][ids]) * inv[a][ids]
+                neg = np.signbit(inv[a][ids])
+                near, far = np.where(neg, t_hi, t_lo), np.where(neg, t_lo, t_hi)
+                tn = np.where(near > tn, near, tn)
+                tf = np.where(far < tf, far, tf)
+            sub = ids[tn <= tf * slack]
+            if len(sub):
+                visit(int(box["child"][k]), sub, level + 1)
+
+    visit(0, active, 0)
+    return tuple(levels.get(d, 0) for d in range(max(levels) + 1))
+
+
+def test_level_rays_equal_an_independent_count(each_isa):
+    """With triangles no ray can hit (zero area), which rays enter which box depends on the
+    boxes alone: the per-level stream sizes equal a walk of the 4-wide tree in NumPy, and
+    add up to stream_rays."""
+    rng = np.random.default_rng(17)
+    m = 600
+    v0 = rng.random((m, 3)) * 10
+    v1 = v0 + rng.normal(size=(m, 3))
+    V = np.stack([v0, v1, 2 * v1 - v0], axis=1).reshape(-1, 3).astype(F32)   # collinear
+    F = np.arange(3 * m, dtype=np.int32).reshape(m, 3)
+    bvh = BVH(V, F, max_leaf=2)
+    rays = random_rays(rng, 1500, bvh.bounds)
+    order = np.arange(len(rays), dtype=np.int32)
+    packets = gather(rays, order, np.array([0, len(rays)], np.int32))
+    want = level_rays_by_python(bvh, packets)
+    hits, c = trace(bvh, rays, min_stream=0)
+    assert (hits.prim == -1).all()
+    assert len(want) > 4 and want[0] == len(rays)
+    assert c.stream_level_rays == want
+    assert sum(c.stream_level_rays) == c.stream_rays
+
+
+def test_level_rays_add_up(soup):
+    """Level 0 holds every ray of every stream, the levels add up to stream_rays (also with
+    the single-ray finish and several streams), and Counters add them entry by entry."""
+    V, F, bvh, rays, _ = soup
+    n = len(rays)
+    for params in (dict(min_stream=0), dict(min_stream=16, stream_size=n // 3 + 1)):
+        _, c = trace(bvh, rays, **params)
+        assert c.stream_level_rays[0] == n
+        assert sum(c.stream_level_rays) == c.stream_rays
+        assert len(c.stream_level_rays) <= bvh.wide_depth + 1
+        assert c.as_dict()["stream_level_rays"] == list(c.stream_level_rays)
+    _, w = trace(bvh, rays, min_stream=1 << 20)          # every ray alone: no streams
+    assert w.stream_level_rays == ()
+    a, b = Counters(), Counters()
+    a.stream_level_rays, b.stream_level_rays = (5, 3), (1, 2, 4)
+    assert (a + b).stream_level_rays == (6, 5, 4)
+    assert (a + Counters()).stream_level_rays == (5, 3)
+
+
 def test_parameters_are_checked():
     with pytest.raises(raysort.ConfigError, match="order"):
         raysort.create("traversals", {"type": "stream", "order": "random"})
@@ -190,4 +268,6 @@ def test_pipeline_image_equals_wide(sibenik):
         result = pipe.render(32, 24, spp=1, seed=3)
         images[name] = result
     assert np.array_equal(images["wide"].image, images["stream"].image)
-    assert images["stream"].stats.counters[1].stream_tasks > 0
+    counters = images["stream"].stats.counters[1]
+    assert counters.stream_tasks > 0
+    assert sum(counters.stream_level_rays) == counters.stream_rays > 0

@@ -256,6 +256,7 @@ typedef struct rs_stream_task {
     int32_t tris;       /* leaf triangles */
     int32_t first;      /* where its ids start in rs_stream_scratch.ids */
     int32_t n;          /* rays in the stream */
+    int32_t level;      /* depth of its box in the 4-wide tree: 0 for the root */
 } rs_stream_task;
 
 /* A box one ray waits to visit, for the single-ray finish of small streams. */
@@ -275,6 +276,9 @@ typedef struct rs_stream_scratch {
     int32_t *sub[4];        /* a node's per-child sub-streams while it is filtered */
     rs_stream_task *tasks;  /* task stack */
     rs_stream_entry *single;/* stack of the single-ray finish */
+    int64_t *level_rays;    /* rays of the streams popped at each level, summed over the
+                             * call (depth + 1 entries: the root is level 0, a leaf is one
+                             * below its node; anything deeper counts in the last) */
     int size;               /* stream size (rays) */
     int depth;              /* levels of the 4-wide tree */
 } rs_stream_scratch;
@@ -288,6 +292,7 @@ RS_INLINE void rs_stream_free(rs_stream_scratch *w)
         free(w->sub[k]);
     free(w->tasks);
     free(w->single);
+    free(w->level_rays);
 }
 
 /* Allocate the scratch memory; returns 0 when out of memory (nothing held). */
@@ -301,8 +306,9 @@ RS_INLINE int rs_stream_alloc(rs_stream_scratch *w, int size, int depth)
         w->sub[k] = (int32_t *)malloc(((size_t)size + RS_SW) * sizeof(int32_t));
     w->tasks = (rs_stream_task *)malloc((size_t)slots * sizeof(rs_stream_task));
     w->single = (rs_stream_entry *)malloc((size_t)slots * sizeof(rs_stream_entry));
+    w->level_rays = (int64_t *)calloc((size_t)depth + 1, sizeof(int64_t));
     if (!w->ids || !w->sub[0] || !w->sub[1] || !w->sub[2] || !w->sub[3] || !w->tasks
-        || !w->single) {
+        || !w->single || !w->level_rays) {
         rs_stream_free(w);
         return 0;
     }
@@ -549,7 +555,8 @@ RS_INLINE void rs_stream_single(const rs_node4 *nodes, const rs_tri *tris, rs_ra
  * visits (the ray meets the node's four child boxes, as in `wide`), one SIMD
  * N_T per triangle and 4 rays (rounded up) a leaf's stream holds, and the
  * single-ray finish counts as `wide` does.  stream_tasks and stream_rays count
- * the streams popped and the rays they held. */
+ * the streams popped and the rays they held, w->level_rays the same rays by the
+ * level of the box the stream was popped at (they add up to stream_rays). */
 RS_INLINE void rs_stream_trace(const rs_node4 *nodes, const rs_tri *tris, rs_rays *r, int n,
                                int any_hit, int order, int min_stream, rs_stream_scratch *w,
                                rs_counters *c)
@@ -560,6 +567,7 @@ RS_INLINE void rs_stream_trace(const rs_node4 *nodes, const rs_tri *tris, rs_ray
     w->tasks[0].tris = 0;
     w->tasks[0].first = 0;
     w->tasks[0].n = n;
+    w->tasks[0].level = 0;
     while (nt > 0) {
         rs_stream_task task = w->tasks[--nt];
         int32_t *ids = w->ids + task.first;
@@ -574,6 +582,7 @@ RS_INLINE void rs_stream_trace(const rs_node4 *nodes, const rs_tri *tris, rs_ray
         }
         c->stream_tasks += 1;
         c->stream_rays += task.n;
+        w->level_rays[task.level < w->depth ? task.level : w->depth] += task.n;
         if (task.ref < 0) {
             c->tri4 += (int64_t)task.tris * ((task.n + 3) / 4);
             rs_stream_leaf(r, &tris[-task.ref - 1], task.tris, ids, task.n, any_hit);
@@ -594,6 +603,7 @@ RS_INLINE void rs_stream_trace(const rs_node4 *nodes, const rs_tri *tris, rs_ray
             child->tris = node->count[k];
             child->first = first;
             child->n = cnt[k];
+            child->level = task.level + 1;
             first += cnt[k];
         }
         if (m)

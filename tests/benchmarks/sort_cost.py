@@ -1,0 +1,192 @@
+"""What sorting costs next to the fast traversals: sort, gather and trace of the same rays.
+
+    python tests/benchmarks/sort_cost.py [scene ...] [--sorters a,b] [--traversals wide8,stream]
+                                         [--rounds 7] [--size 256] [--json out.json]
+                                         [--markdown]
+    python tests/benchmarks/sort_cost.py --medians run1.json run2.json ...
+
+For each scene (default: sibenik, sponza, forest) the first-bounce diffuse rays of a
+``--size`` square render at 1 spp (:func:`raysort.workloads.workload`, the rays ``raysort
+bench --kernels`` measures) are, for every sorter (default: every installed one) and every
+traversal, sorted, gathered and traced, and each of the three is timed by the thread's CPU
+clock (``time.thread_time``: one thread, so other jobs on the machine count less than in wall
+time).  The configurations (sorter x traversal) run in interleaved rounds, in an order
+shuffled per round, after one untimed warm-up round (:func:`raysort.bench.rounds.run_rounds`).
+Per configuration it prints the medians of sort, gather and trace [min-max], and the median of
+the per-round shares (sort + gather) / trace [min-max]: the budget of issue 13 is 10 %.  Every
+configuration's hits must equal the first one's (t bit for bit, prim), or the run fails.
+``--markdown`` also prints each scene as a Markdown table (sorters by rows, one sort + gather
+share column per traversal), as BENCHMARKS.md shows it.  ``--medians`` runs nothing: it prints,
+per scene, sorter and traversal, the median over the given ``--json`` files of each run's median
+sort time and share (for runs of two builds alternated on a shared machine).
+"""
+import argparse
+import json
+import sys
+import time
+
+import numpy as np
+
+from raysort import registry
+from raysort.bench.report import load_average, machine_info
+from raysort.bench.rounds import run_rounds, summary
+from raysort.rays import gather, scatter
+from raysort.scene import load_scene
+from raysort.workloads import workload
+
+BUDGET = 0.10
+
+
+class Config:
+    """One sorter and one traversal on one workload: each call sorts, gathers and traces once,
+    keeps the three thread-CPU times and returns the trace's."""
+
+    def __init__(self, sorter, traversal, bvh, work):
+        self.sorter_name, self.traversal_name = sorter, traversal
+        self.sorter = registry.create("sorters", sorter)
+        self.traversal = registry.create("traversals", traversal)
+        self.bvh, self.work = bvh, work
+        self.sort, self.gather, self.trace = [], [], []
+        self.hits = None
+
+    def __call__(self):
+        w = self.work
+        packets_in, bounds = w.packets.copy(), self.bvh.bounds.copy()
+        t0 = time.thread_time()
+        order, offsets = self.sorter.sort(w.rays, packets_in, bounds)
+        t1 = time.thread_time()
+        packets = gather(w.rays, order, offsets)
+        t2 = time.thread_time()
+        self.traversal.intersect(self.bvh, packets, any_hit=False)
+        t3 = time.thread_time()
+        self.sort.append(t1 - t0)
+        self.gather.append(t2 - t1)
+        self.trace.append(t3 - t2)
+        self.hits = scatter(packets, len(w))
+        return t3 - t2
+
+    def row(self, rounds):
+        """Medians and spreads of the timed rounds (the warm-up is dropped)."""
+        sort, gath, trace = (np.asarray(x[-rounds:]) for x in (self.sort, self.gather, self.trace))
+        return {"sorter": self.sorter_name, "traversal": self.traversal_name,
+                "sort": summary(sort), "gather": summary(gath), "trace": summary(trace),
+                "share": summary((sort + gath) / trace)}
+
+
+def same_hits(a, b):
+    return bool(np.array_equal(a.t.view(np.uint32), b.t.view(np.uint32))
+                and np.array_equal(a.prim, b.prim))
+
+
+def spread_ms(s):
+    return f"{1e3 * s['median']:7.2f} [{1e3 * s['min']:.2f}-{1e3 * s['max']:.2f}]"
+
+
+def spread_pct(s):
+    return f"{100 * s['median']:5.1f} % [{100 * s['min']:.1f}-{100 * s['max']:.1f}]"
+
+
+def markdown(scene, rows, traversals):
+    """One scene's rows as a Markdown table: a row per sorter, the sort and gather medians
+    (of the first traversal's rounds) and the median share [min-max] per traversal."""
+    by = {(r["sorter"], r["traversal"]): r for r in rows}
+    sorters = list(dict.fromkeys(r["sorter"] for r in rows))
+    head = ["sorter", "sort ms", "gather ms"] + [f"{t} ms" for t in traversals] + \
+        [f"share vs {t}" for t in traversals]
+    lines = [f"{scene}:", "", "| " + " | ".join(head) + " |",
+             "| --- |" + " ---: |" * (len(head) - 1)]
+    for s in sorters:
+        first = by[s, traversals[0]]
+        cells = [s, f"{1e3 * first['sort']['median']:.2f}", f"{1e3 * first['gather']['median']:.2f}"]
+        cells += [f"{1e3 * by[s, t]['trace']['median']:.1f}" for t in traversals]
+        cells += [f"{100 * by[s, t]['share']['median']:.1f} % "
+                  f"[{100 * by[s, t]['share']['min']:.1f}–{100 * by[s, t]['share']['max']:.1f}]"
+                  for t in traversals]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def medians(paths):
+    """Per (scene, sorter, traversal): the median over runs of each run's median sort
+    seconds, gather seconds, trace seconds and share."""
+    runs = {}
+    for path in paths:
+        with open(path, encoding="utf-8") as fh:
+            report = json.load(fh)
+        for scene, data in report["scenes"].items():
+            for r in data["rows"]:
+                runs.setdefault((scene, r["sorter"], r["traversal"]), []).append(r)
+    print(f"median over {len(paths)} runs of each run's median "
+          f"(thread-CPU ms; share = (sort + gather) / trace)")
+    print(f"{'scene':10s}{'sorter':18s}{'traversal':10s}{'sort':>8s}{'gather':>8s}"
+          f"{'trace':>8s}{'share':>9s}")
+    for (scene, sorter, traversal), rows in runs.items():
+        sort, gath, trace, share = (np.median([r[key]["median"] for r in rows])
+                                    for key in ("sort", "gather", "trace", "share"))
+        print(f"{scene:10s}{sorter:18s}{traversal:10s}{1e3 * sort:8.2f}{1e3 * gath:8.2f}"
+              f"{1e3 * trace:8.1f}{100 * share:7.1f} %")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("scenes", nargs="*", default=["sibenik", "sponza", "forest"])
+    parser.add_argument("--sorters", default=None,
+                        help="comma-separated sorter specs (default: every installed sorter)")
+    parser.add_argument("--traversals", default="wide8,stream")
+    parser.add_argument("--rounds", type=int, default=7, help="timed rounds (7)")
+    parser.add_argument("--size", type=int, default=256, help="image edge in pixels (256)")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--json", default=None, help="also write the results here")
+    parser.add_argument("--markdown", action="store_true", help="also print Markdown tables")
+    parser.add_argument("--medians", nargs="+", metavar="JSON",
+                        help="only summarise these --json files (see the module docstring)")
+    args = parser.parse_args(argv)
+    if args.medians:
+        medians(args.medians)
+        return 0
+    sorters = (args.sorters.split(",") if args.sorters
+               else [s for s in registry.available("sorters")])
+    traversals = args.traversals.split(",")
+    machine = machine_info()
+    report = {"machine": machine, "load": {"before": load_average()}, "rounds": args.rounds,
+              "size": args.size, "seed": args.seed, "scenes": {}}
+    print(f"CPU {machine['cpu']}, {machine['cores']} cores, ISA {machine['isa']}, "
+          f"load {report['load']['before']}; thread-CPU ms, median [min-max] of "
+          f"{args.rounds} interleaved rounds; share = (sort + gather) / trace, per round")
+    failed = False
+    for j, spec in enumerate(args.scenes):
+        scene = load_scene(spec)
+        bvh = scene.bvh()
+        work = workload(scene, "diffuse", width=args.size, height=args.size, seed=args.seed)
+        configs = [Config(s, t, bvh, work) for s in sorters for t in traversals]
+        run_rounds(configs, args.rounds, seed=j)
+        rows = [c.row(args.rounds) for c in configs]
+        for c, r in zip(configs, rows):
+            r["identical_hits"] = same_hits(c.hits, configs[0].hits)
+            failed |= not r["identical_hits"]
+        report["scenes"][scene.name] = {"rays": len(work), "triangles": scene.n_triangles,
+                                        "rows": rows}
+        print(f"\n{scene.name}: {len(work)} first-bounce diffuse rays, "
+              f"{scene.n_triangles} triangles")
+        print(f"{'sorter':18s}{'traversal':10s}{'sort ms':>22s}{'gather ms':>22s}"
+              f"{'trace ms':>24s}   share")
+        for r in rows:
+            flag = "" if r["identical_hits"] else "  HITS DIFFER"
+            over = "  > 10 %" if r["share"]["median"] > BUDGET else ""
+            print(f"{r['sorter']:18s}{r['traversal']:10s}{spread_ms(r['sort']):>22s}"
+                  f"{spread_ms(r['gather']):>22s}{spread_ms(r['trace']):>24s}   "
+                  f"{spread_pct(r['share'])}{over}{flag}")
+        sys.stdout.flush()
+    report["load"]["after"] = load_average()
+    print(f"\nload after: {report['load']['after']}")
+    if args.markdown:
+        for name, scene in report["scenes"].items():
+            print("\n" + markdown(name, scene["rows"], traversals))
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as fh:
+            json.dump(report, fh, indent=1)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
