@@ -18,14 +18,14 @@ cdef enum:
     UNWRITTEN_OCCLUDED = 2  # the same for an any-hit query's flags
 
 
-def offsets_valid(const int32_t[::1] offsets, int32_t n):
-    """A sorter's ``offsets`` run from 0 to ``n`` in sub-packets of 1..RS_MAX_PACKET rays
+def offsets_valid(const int32_t[::1] offsets, int32_t n, int32_t max_packet=RS_MAX_PACKET):
+    """A sorter's ``offsets`` run from 0 to ``n`` in sub-packets of 1..max_packet rays
     (what :func:`gather` needs before the packets are allocated)."""
     cdef int bad
     if offsets.shape[0] < 1:
         return False
     with nogil:
-        bad = offsets_bad(&offsets[0], offsets.shape[0] - 1, n, RS_MAX_PACKET)
+        bad = offsets_bad(&offsets[0], offsets.shape[0] - 1, n, max_packet)
     return not bad
 
 

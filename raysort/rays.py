@@ -283,28 +283,31 @@ def gather(rays, order, offsets):
     Sub-packet k holds the rays ``order[offsets[k]:offsets[k + 1]]``.  The
     copy runs four rays at a time with SIMD stores and computes the inverse
     directions.  ``order`` must be a permutation of the batch and ``offsets``
-    run from 0 to ``len(rays)`` in sub-packets of 1..``MAX_PACKET`` rays
-    (checked first; ValueError otherwise).
+    run from 0 to ``len(rays)`` in sub-packets of at least one ray (checked
+    first; ValueError otherwise).  A traversal takes sub-packets of at most
+    ``MAX_PACKET`` rays; larger ones suit a reference that loops over rays.
     """
     n = len(rays)
     order = np.ascontiguousarray(order, dtype=np.int32)
     offsets = np.ascontiguousarray(offsets, dtype=np.int32)
     one_packet = np.array([0, n], np.int32)
     if len(order) != n or len(offsets) < 1 or isa.module("_contract").sort_result(
-            order, offsets, one_packet, n, MAX_PACKET)[0]:
+            order, offsets, one_packet, n, max(n, 1))[0]:
         raise ValueError(f"gather: order must be a permutation of the {n} rays and offsets "
-                         f"run from 0 to {n} in sub-packets of 1..{MAX_PACKET} rays "
+                         f"run from 0 to {n} in non-empty sub-packets "
                          f"(raysort.contract.check_sort says what is wrong)")
-    return gather_checked(rays, order, offsets, one_packet, check_order=False)[0]
+    return gather_checked(rays, order, offsets, one_packet, check_order=False,
+                          max_packet=max(n, 1))[0]
 
 
-def gather_checked(rays, order, offsets, packets, keep_tmax=False, check_order=True):
+def gather_checked(rays, order, offsets, packets, keep_tmax=False, check_order=True,
+                   max_packet=MAX_PACKET):
     """:func:`gather` checking a sorter's result against the large packets ``packets``
     (unless ``check_order`` is False: a trusted sorter's) and the rays against the ray
     contract on the way, for the pipeline.
 
     ``order`` and ``offsets`` are int32 arrays with ``len(order) == len(rays)``;
-    ``packets`` valid boundaries.  Returns ``(Packets, tmax, bad_ray)``:
+    ``packets`` valid boundaries; sub-packets hold 1..``max_packet`` rays.  Returns ``(Packets, tmax, bad_ray)``:
     ``(None, None, -1)`` if the offsets break their contract or a sub-packet holds a
     ray beyond its large packet (:func:`raysort.contract.check_sort` says how; a ray
     that comes twice is found by :func:`scatter_checked`); ``tmax`` (with ``keep_tmax``;
@@ -313,7 +316,7 @@ def gather_checked(rays, order, offsets, packets, keep_tmax=False, check_order=T
     that is active yet not finite or with tmin < 0 (traced as invalid), or -1.
     """
     kernels = isa.module("_gather")
-    if len(order) != len(rays) or not kernels.offsets_valid(offsets, len(rays)):
+    if len(order) != len(rays) or not kernels.offsets_valid(offsets, len(rays), max_packet):
         return None, None, -1
     batch = Packets(np.diff(offsets))
     tmax = np.empty(batch.capacity, np.float32) if keep_tmax else None

@@ -441,3 +441,11 @@ def test_scatter_rejects_an_index_beyond_the_hits():
         scatter(packets, 4)
     with pytest.raises(ValueError, match="beyond"):
         scatter_occluded(packets, 4)
+
+
+def test_gather_takes_one_sub_packet_larger_than_a_traversal_does():
+    """A reference that loops over rays (raysort.reference) gathers the batch whole."""
+    n = MAX_PACKET + 5
+    rays = RayBatch.from_arrays(np.zeros((n, 3)), np.tile([0, 0, 1.0], (n, 1)))
+    packets = gather(rays, np.arange(n, dtype=np.int32), np.array([0, n], np.int32))
+    assert packets.counts.tolist() == [n] and (packets.index[:n] == np.arange(n)).all()
