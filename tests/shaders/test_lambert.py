@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import raysort
+from raysort.rays import MAX_PACKET
 from raysort.reference import brute_force
 from raysort.workloads import workload
 
@@ -24,10 +25,13 @@ def bounce():
     cornell = raysort.load_scene("cornell")
     primary = workload(cornell, "primary", **SIZE)
     rays = workload(cornell, "diffuse", **SIZE).rays
-    hits = brute_force(cornell.vertices, cornell.faces, primary.rays)
-    hit = np.flatnonzero(hits.prim >= 0)
+    prim = np.concatenate([     # brute force, a large packet at a time
+        brute_force(cornell.vertices, cornell.faces,
+                    primary.rays.take(np.arange(a, min(a + MAX_PACKET, len(primary))))).prim
+        for a in range(0, len(primary), MAX_PACKET)])
+    hit = np.flatnonzero(prim >= 0)
     assert len(rays) == len(hit) > 20_000
-    nrm = cornell.face_normals()[hits.prim[hit]].T.astype(np.float64)
+    nrm = cornell.face_normals()[prim[hit]].T.astype(np.float64)
     nrm *= np.where((nrm * primary.rays.directions[:, hit]).sum(axis=0) > 0, -1.0, 1.0)
     return rays.directions.astype(np.float64), nrm
 
