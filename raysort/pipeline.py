@@ -69,7 +69,9 @@ class RenderStats:
     """Where the time went and how much work the traversal did.
 
     ``stage_seconds`` are the CPU seconds of each stage (thread CPU time, summed
-    over worker threads, so a thread waiting for the GIL or a core costs nothing);
+    over worker threads, so a thread waiting for the GIL or a core costs nothing;
+    ``shade`` includes the paths' bookkeeping after the shader: the next packets,
+    the paths taken, adding the unoccluded shadow rays);
     ``wall_seconds`` is the elapsed time of the whole render.
     """
 
@@ -517,11 +519,13 @@ class Pipeline:
                 if bounce.shadow is not None and len(bounce.shadow.rays):
                     self._trace_shadows(bounce.shadow, packets, radiance, stats, tap, tile,
                                         depth)
+                clock.lap(None)             # the shadow rays' stages timed themselves
                 packets = np.searchsorted(bounce.parent, packets).astype(np.int32)
                 paths = paths.take(bounce.parent, bounce.throughput)
                 rays, maker = bounce.rays, ("shaders", self.shader, "Bounce.rays")
                 if rays.prev_t is None:     # each path's last hit distance, for sorters
                     rays.prev_t = hits.t[bounce.parent]
+                clock.lap("shade")          # the paths' bookkeeping counts as shading
                 depth += 1
                 if depth > MAX_BOUNCES and len(rays):
                     raise contract.plugin_error("shaders", self.shader, f"shade() still returns "
