@@ -7,7 +7,6 @@ direction on the way (``rs_gather4`` in simd.h).
 """
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.math cimport INFINITY
-from libc.string cimport memcpy
 from raysort._checks cimport offsets_bad, packet_bounds, range_bad
 from raysort._types cimport (rs_gather4, rs_isa_name, rs_prefetch, RS_MAX_PACKET,
                              RS_RAY_ROWS, RS_PACKET_ROWS, RS_PACKET_TMIN, RS_PACKET_T)
@@ -39,7 +38,7 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
     boundaries ending at n).  (That no ray comes twice is left to the scatter, which
     writes each ray once: see :func:`unwritten`.)  ``offsets`` must be valid
     (:func:`offsets_valid`), ``len(order) == n``, and ``starts``/``dst``/... sized for
-    them.  With ``t0``, the row ``t`` as gathered (each ray's tmax) is copied there.
+    them.  With ``t0``, the row ``t`` as gathered (each ray's tmax) is written there too.
 
     Returns ``(order_ok, bad_ray)``: ``order_ok`` is False at the first sub-packet that
     breaks the order contract (the gather stops there); ``bad_ray`` is a ray that breaks
@@ -52,6 +51,11 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
     cdef int32_t idx[4]
     cdef int c, lane, bad_lanes, order_bad = 0
     cdef int32_t bad_ray = -1, lo = 0, hi = 0
+    cdef float *tmax = NULL
+    if t0 is not None:
+        if t0.shape[0] != dst.shape[1]:
+            raise ValueError("t0 must hold one value per lane")
+        tmax = &t0[0]
     for c in range(RS_RAY_ROWS):
         src_rows[c] = &src[c, 0]
     for c in range(RS_PACKET_ROWS):
@@ -76,7 +80,7 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
                 for lane in range(4):
                     idx[lane] = order[base + j + lane] if j + lane < count else -1
                 s = starts[k] + j
-                bad_lanes = rs_gather4(dst_rows, &prim[0], &u[0], &v[0], s, src_rows, idx)
+                bad_lanes = rs_gather4(dst_rows, &prim[0], &u[0], &v[0], tmax, s, src_rows, idx)
                 if bad_lanes and bad_ray < 0:
                     for lane in range(3, -1, -1):
                         if bad_lanes & (1 << lane):
@@ -90,11 +94,9 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
             for j in range(s, dst.shape[1], 4):
                 for lane in range(4):
                     idx[lane] = -1
-                rs_gather4(dst_rows, &prim[0], &u[0], &v[0], j, src_rows, idx)
+                rs_gather4(dst_rows, &prim[0], &u[0], &v[0], tmax, j, src_rows, idx)
                 for lane in range(4):
                     index[j + lane] = -1
-            if t0 is not None:
-                memcpy(&t0[0], &dst[RS_PACKET_T, 0], dst.shape[1] * sizeof(float))
     return not order_bad, bad_ray
 
 

@@ -36,6 +36,7 @@ __all__ = ["check_packets", "check_ray_batch", "sort_arrays", "check_sort", "che
            "check_bounce", "call_plugin", "before_traversal", "plugin_error"]
 
 _BAD = _contract.Bad
+_INT32, _FLOAT32 = np.dtype(np.int32), np.dtype(np.float32)
 
 
 def _kernels():
@@ -207,6 +208,13 @@ def sort_arrays(plugin, result, n):
     """A sorter's ``(order, offsets)`` for ``n`` rays as contiguous int32 arrays, checking
     what is not a matter of their values (the tuple, integer types, ``len(order) == n``,
     an offset at all, every value within int32); :func:`check_sort` checks the rest."""
+    if type(result) is tuple and len(result) == 2:
+        order, offsets = result
+        if (type(order) is np.ndarray and type(offsets) is np.ndarray
+                and order.dtype is _INT32 and offsets.dtype is _INT32
+                and order.shape == (n,) and offsets.ndim == 1 and len(offsets)
+                and order.flags.c_contiguous and offsets.flags.c_contiguous):
+            return order, offsets                   # what the built-in sorters return
     fail = _failer("sorters", plugin)
     if not (isinstance(result, tuple) and len(result) == 2):
         fail(f"sort() must return (order, offsets), got {type(result).__name__}")
@@ -427,9 +435,6 @@ def _paths(rays, parent, slot, weight, n, slots, label, weight_name, fail, with_
     if code == _BAD.BAD_SLOT:
         fail(f"{label}.slot[{i}] = {slot[i]} is out of range 0..{slots - 1}")
     return parent, slot, weight
-
-
-_INT32, _FLOAT32 = np.dtype(np.int32), np.dtype(np.float32)
 
 
 def _int32(value, label, length, fail):

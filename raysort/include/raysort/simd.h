@@ -375,11 +375,13 @@ RS_INLINE int rs_tri4(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
  * otherwise (NaN rays, padding) it is stored inactive.  Subnormal direction
  * components are stored as zeros, so 1 / d is either finite or +-inf. */
 RS_INLINE int rs_gather4(float *const dst[RS_PACKET_ROWS], int32_t *prim, float *u, float *v,
-                         int j, const float *const src[RS_RAY_ROWS], const int32_t idx[4])
+                         float *tmax, int j, const float *const src[RS_RAY_ROWS],
+                         const int32_t idx[4])
 {
     /* Returns the lanes (bits) holding a ray that breaks the ray contract: active
        (tmin < tmax) yet with tmin < 0 or a non-finite origin or direction.  Such a ray,
-       like every invalid one, is stored inactive. */
+       like every invalid one, is stored inactive.  tmax (unless NULL) gets a copy of
+       the row t as stored, for the check of the traversal's hits. */
     float lane[RS_RAY_ROWS][4];
     for (int k = 0; k < 4; ++k) {
         int32_t s = idx[k];
@@ -406,7 +408,10 @@ RS_INLINE int rs_gather4(float *const dst[RS_PACKET_ROWS], int32_t *prim, float 
         rs_store(dst[RS_PACKET_IX + a] + j, rs_blend(ok, rs_div(rs_set1(1.0f), d), zero));
     }
     rs_store(dst[RS_PACKET_TMIN] + j, rs_blend(ok, row[RS_RAY_TMIN], inf));
-    rs_store(dst[RS_PACKET_T] + j, rs_blend(ok, row[RS_RAY_TMAX], rs_set1(-INFINITY)));
+    rs_v4f t = rs_blend(ok, row[RS_RAY_TMAX], rs_set1(-INFINITY));
+    rs_store(dst[RS_PACKET_T] + j, t);
+    if (tmax)
+        rs_store(tmax + j, t);
     rs_storei(prim + j, rs_set1i(-1));
     rs_store(u + j, zero);
     rs_store(v + j, zero);
