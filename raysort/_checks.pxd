@@ -56,6 +56,16 @@ cdef inline int packet_bounds(int32_t first, const int32_t *packets, Py_ssize_t 
     return 0
 
 
+cdef inline int range_bad(const int32_t *order, Py_ssize_t a, Py_ssize_t b, int32_t lo,
+                           int32_t hi) noexcept nogil:
+    """Any of ``order[a:b]`` outside ``[lo, hi)`` (a loop the compiler vectorises)."""
+    cdef Py_ssize_t i
+    cdef int bad = 0
+    for i in range(a, b):
+        bad |= (order[i] < lo) | (order[i] >= hi)
+    return bad
+
+
 cdef inline int32_t checked_ray(int32_t j, int32_t lo, int32_t hi, int32_t n, uint8_t *seen,
                                 int *bad) noexcept nogil:
     """``j`` if it is a ray of the large packet ``[lo, hi)`` (within ``[0, n)``), else -1;

@@ -7,14 +7,15 @@ direction on the way (``rs_gather4`` in simd.h).
 """
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.math cimport INFINITY
-from libc.stdlib cimport calloc, free
 from libc.string cimport memcpy
-from raysort._checks cimport checked_ray, offsets_bad, packet_bounds
+from raysort._checks cimport offsets_bad, packet_bounds, range_bad
 from raysort._types cimport (rs_gather4, rs_isa_name, rs_prefetch, RS_MAX_PACKET,
                              RS_RAY_ROWS, RS_PACKET_ROWS, RS_PACKET_TMIN, RS_PACKET_T)
 
 cdef enum:
     PREFETCH_AHEAD = 16     # rays (in the sorter's order) between a prefetch and its use
+    UNWRITTEN = -2          # prim of a ray no lane was scattered to (see unwritten)
+    UNWRITTEN_OCCLUDED = 2  # the same for an any-hit query's flags
 
 
 def offsets_valid(const int32_t[::1] offsets, int32_t n):
@@ -35,7 +36,8 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
     """Gather ``order[offsets[k]:offsets[k + 1]]`` into sub-packet k, checking the sorter's
     order on the way (unless ``check_order`` is False, for a trusted sorter): each
     sub-packet must hold rays of ``[0, n)`` from one large packet (``packets``: valid
-    boundaries ending at n), none twice.  ``offsets`` must be valid
+    boundaries ending at n).  (That no ray comes twice is left to the scatter, which
+    writes each ray once: see :func:`unwritten`.)  ``offsets`` must be valid
     (:func:`offsets_valid`), ``len(order) == n``, and ``starts``/``dst``/... sized for
     them.  With ``t0``, the row ``t`` as gathered (each ray's tmax) is copied there.
 
@@ -50,9 +52,6 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
     cdef int32_t idx[4]
     cdef int c, lane, bad_lanes, order_bad = 0
     cdef int32_t bad_ray = -1, lo = 0, hi = 0
-    cdef uint8_t *seen = <uint8_t *> calloc(n + 1, 1) if check_order else NULL
-    if check_order and seen == NULL:
-        raise MemoryError()
     for c in range(RS_RAY_ROWS):
         src_rows[c] = &src[c, 0]
     for c in range(RS_PACKET_ROWS):
@@ -61,8 +60,9 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
         for k in range(n_packets):
             base = offsets[k]
             count = offsets[k + 1] - base
-            if check_order and packet_bounds(order[base], &packets[0], packets.shape[0] - 1, n,
-                                             &k_big, &lo, &hi):
+            if check_order and (
+                    packet_bounds(order[base], &packets[0], packets.shape[0] - 1, n, &k_big,
+                                  &lo, &hi) or range_bad(&order[0], base, base + count, lo, hi)):
                 order_bad = 1
                 break
             for j in range(0, count, 4):
@@ -73,10 +73,8 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
                     if ahead < n and <uint32_t> order[ahead] < <uint32_t> n:
                         for c in range(RS_RAY_ROWS):
                             rs_prefetch(src_rows[c] + order[ahead])
-                for lane in range(4):   # a ray the order may not name reads nothing
-                    idx[lane] = -1 if j + lane >= count else (
-                        checked_ray(order[base + j + lane], lo, hi, n, seen, &order_bad)
-                        if check_order else order[base + j + lane])
+                for lane in range(4):
+                    idx[lane] = order[base + j + lane] if j + lane < count else -1
                 s = starts[k] + j
                 bad_lanes = rs_gather4(dst_rows, &prim[0], &u[0], &v[0], s, src_rows, idx)
                 if bad_lanes and bad_ray < 0:
@@ -85,8 +83,6 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
                             bad_ray = idx[lane]
                 for lane in range(4):
                     index[s + lane] = idx[lane]
-            if order_bad:
-                break
         if not order_bad:
             # lanes after the last sub-packet (an empty batch still has 4 lanes)
             s = starts[n_packets - 1] + ((offsets[n_packets] - offsets[n_packets - 1] + 3) & ~3) \
@@ -99,7 +95,6 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
                     index[j + lane] = -1
             if t0 is not None:
                 memcpy(&t0[0], &dst[RS_PACKET_T, 0], dst.shape[1] * sizeof(float))
-    free(seen)
     return not order_bad, bad_ray
 
 
@@ -146,6 +141,25 @@ def scatter_occluded(const int32_t[::1] prim, const int32_t[::1] index, unsigned
                     break
                 out[index[s]] = prim[s] >= 0
     return ok
+
+
+UNWRITTEN_PRIM, UNWRITTEN_FLAG = UNWRITTEN, UNWRITTEN_OCCLUDED     # for Python
+
+
+def unwritten(const int32_t[::1] prim, const uint8_t[::1] occluded):
+    """Whether a scatter left a ray unwritten: ``prim`` (closest hits, made full of
+    ``UNWRITTEN``) or ``occluded`` (any hits, full of ``UNWRITTEN``) still holds one.
+    Each of ``n`` lanes writes one ray, so a ray left out means another came twice."""
+    cdef Py_ssize_t i
+    cdef int left = 0
+    with nogil:
+        if occluded is None:
+            for i in range(prim.shape[0]):
+                left |= prim[i] == UNWRITTEN
+        else:
+            for i in range(occluded.shape[0]):
+                left |= occluded[i] == UNWRITTEN_OCCLUDED
+    return bool(left)
 
 
 def add_unoccluded(double[:, ::1] radiance, const int32_t[::1] slot,

@@ -37,8 +37,7 @@ from raysort.errors import ConfigError
 from raysort.params import boolean, integer
 from raysort.paths import Paths
 from raysort.progress import with_rays
-from raysort.rays import (MAX_RAYS, Hits, RayBatch, add_unoccluded, gather_checked, scatter,
-                          scatter_checked, scatter_occluded)
+from raysort.rays import MAX_RAYS, Hits, RayBatch, add_unoccluded, gather_checked, scatter_checked
 from raysort.scene import Scene, load_scene
 from raysort.stats import Counters
 
@@ -353,19 +352,19 @@ class Pipeline:
         arrays = contract.packet_arrays(batch) if check_hits else None
         counters = self._intersect(batch, any_hit, threads, timings)
         clock.lap("traverse")
-        if not check_hits:
-            out = scatter_occluded(batch, n) if any_hit else scatter(batch, n)
-            clock.lap("scatter")
-            return out, counters
-        if not all(map(operator.is_, contract.packet_arrays(batch), arrays)):
+        if check_hits and not all(map(operator.is_, contract.packet_arrays(batch), arrays)):
             contract.check_packet_arrays(self.traversal, batch, arrays)     # names it
-        clock.lap("check")
-        out = scatter_checked(batch, order, offsets, tmax, len(self.bvh.faces), any_hit)
+        out, fault = scatter_checked(batch, order, offsets, tmax, len(self.bvh.faces), any_hit,
+                                     check_hits=check_hits, check_order=check_sort)
         clock.lap("scatter")
-        if out is None:
-            contract.check_hits(self.traversal, batch, (arrays, batch.t if any_hit else tmax),
+        if fault == "hits":
+            contract.check_hits(self.traversal, batch, (arrays or contract.packet_arrays(batch),
+                                                        batch.t if tmax is None else tmax),
                                 order, offsets, len(self.bvh.faces), any_hit)
             raise AssertionError("the scatter rejected hits that check_hits passes")
+        if fault == "order":
+            contract.check_sort(self.sorter, result, n, packets)
+            raise AssertionError("the scatter left out a ray of an order check_sort passes")
         return out, counters
 
     def _intersect(self, batch, any_hit, threads=1, timings=None):

@@ -176,9 +176,9 @@ class Hits:
 
     __slots__ = ("t", "prim", "u", "v")
 
-    def __init__(self, n):
+    def __init__(self, n, _prim=-1):
         self.t = np.full(n, np.inf, dtype=np.float32)
-        self.prim = np.full(n, -1, dtype=np.int32)
+        self.prim = np.full(n, _prim, dtype=np.int32)
         self.u = np.zeros(n, dtype=np.float32)
         self.v = np.zeros(n, dtype=np.float32)
 
@@ -284,17 +284,18 @@ def gather(rays, order, offsets):
     copy runs four rays at a time with SIMD stores and computes the inverse
     directions.  ``order`` must be a permutation of the batch and ``offsets``
     run from 0 to ``len(rays)`` in sub-packets of 1..``MAX_PACKET`` rays
-    (checked on the way; ValueError otherwise).
+    (checked first; ValueError otherwise).
     """
     n = len(rays)
     order = np.ascontiguousarray(order, dtype=np.int32)
     offsets = np.ascontiguousarray(offsets, dtype=np.int32)
-    packets, _, bad_ray = gather_checked(rays, order, offsets, np.array([0, n], np.int32))
-    if packets is None:
+    one_packet = np.array([0, n], np.int32)
+    if len(order) != n or len(offsets) < 1 or isa.module("_contract").sort_result(
+            order, offsets, one_packet, n, MAX_PACKET)[0]:
         raise ValueError(f"gather: order must be a permutation of the {n} rays and offsets "
                          f"run from 0 to {n} in sub-packets of 1..{MAX_PACKET} rays "
                          f"(raysort.contract.check_sort says what is wrong)")
-    return packets
+    return gather_checked(rays, order, offsets, one_packet, check_order=False)[0]
 
 
 def gather_checked(rays, order, offsets, packets, keep_tmax=False, check_order=True):
@@ -304,8 +305,9 @@ def gather_checked(rays, order, offsets, packets, keep_tmax=False, check_order=T
 
     ``order`` and ``offsets`` are int32 arrays with ``len(order) == len(rays)``;
     ``packets`` valid boundaries.  Returns ``(Packets, tmax, bad_ray)``:
-    ``(None, None, -1)`` if the order or offsets break their contract
-    (:func:`raysort.contract.check_sort` says how); ``tmax`` (with ``keep_tmax``;
+    ``(None, None, -1)`` if the offsets break their contract or a sub-packet holds a
+    ray beyond its large packet (:func:`raysort.contract.check_sort` says how; a ray
+    that comes twice is found by :func:`scatter_checked`); ``tmax`` (with ``keep_tmax``;
     otherwise None) each lane's t as gathered, which :func:`scatter_checked` needs
     for closest hits; ``bad_ray`` a ray
     that is active yet not finite or with tmin < 0 (traced as invalid), or -1.
@@ -338,25 +340,43 @@ def scatter_occluded(packets, n):
     return occluded.view(bool)
 
 
-def scatter_checked(packets, order, offsets, tmax, n_prim, any_hit):
-    """Check the hits a traversal wrote into :func:`gather_checked`'s ``packets`` (the
-    rules of :func:`raysort.contract.check_hits`, but for the arrays being the ones
-    gathered) and scatter them.  Returns the :class:`Hits` (or, with ``any_hit``, the
-    bool array of occluded rays), or None when the traversal broke its contract.
-    ``tmax`` may be None for an any-hit query.
+def scatter_checked(packets, order, offsets, tmax, n_prim, any_hit, *, check_hits=True,
+                    check_order=True):
+    """Scatter the hits a traversal wrote into :func:`gather_checked`'s ``packets``,
+    checking them first (``check_hits``: the rules of
+    :func:`raysort.contract.check_hits`, for the arrays being the ones gathered; a pass
+    over lanes in order, which vectorises) and that every ray got one lane
+    (``check_order``: the rest of the sorter's contract, found from rays the scatter
+    left unwritten).  ``tmax`` (each lane's t as gathered) is needed for closest hits
+    with ``check_hits``.
 
-    The check is a separate pass before the scatter: over lanes, in order, it
-    vectorises, which the scatter's writes in ray order do not."""
-    try:
-        code, _ = isa.module("_contract").hits(
-            packets.rows, packets.t if tmax is None else tmax, packets.prim, packets.u,
-            packets.v, packets.index, packets.starts, packets.counts, order, offsets, n_prim,
-            any_hit)
-    except (TypeError, ValueError):         # an array retyped in place
-        return None
-    if code:
-        return None
-    return scatter_occluded(packets, len(order)) if any_hit else scatter(packets, len(order))
+    Returns ``(out, fault)``: the :class:`Hits` (with ``any_hit``, the bool array of
+    occluded rays) and None, or None and ``"hits"`` (the traversal broke its contract)
+    or ``"order"`` (the sorter's order is not a permutation)."""
+    kernels, n = isa.module("_gather"), len(order)
+    if check_hits:
+        try:
+            code, _ = isa.module("_contract").hits(
+                packets.rows, packets.t if tmax is None else tmax, packets.prim, packets.u,
+                packets.v, packets.index, packets.starts, packets.counts, order, offsets,
+                n_prim, any_hit)
+        except (TypeError, ValueError):         # an array retyped in place
+            code = 1
+        if code:
+            return None, "hits"
+    if any_hit:
+        out = np.full(n, kernels.UNWRITTEN_FLAG if check_order else 0, dtype=np.uint8)
+        ok = kernels.scatter_occluded(packets.prim, packets.index, out)
+        left = check_order and kernels.unwritten(None, out)
+        out = out.view(bool)
+    else:
+        out = Hits(n, kernels.UNWRITTEN_PRIM if check_order else -1)
+        ok = kernels.scatter(packets.rows, packets.prim, packets.u, packets.v, packets.index,
+                             out.t, out.prim, out.u, out.v)
+        left = check_order and kernels.unwritten(out.prim, None)
+    if not ok:                                  # an index beyond the batch
+        return None, "hits"
+    return (None, "order") if left else (out, None)
 
 
 def add_unoccluded(radiance, slot, contribution, occluded):

@@ -208,13 +208,14 @@ def test_pipeline_rejects_broken_sorter(registered, check_plugins):
     assert "permutation" in str(info.value)
 
 
-def test_trace_rejects_broken_sorter(registered):
-    """Pipeline.trace on a plain batch runs the same check."""
+@pytest.mark.parametrize("any_hit", [False, True])
+def test_trace_rejects_broken_sorter(registered, any_hit):
+    """Pipeline.trace on a plain batch runs the same check, for either query."""
     registered("broken_test", BrokenSorter)
     pipe = raysort.Pipeline("plane", sorter="broken_test", check_plugins=False)
     rays = RayBatch.from_arrays(np.tile([0.0, 1.0, 0.0], (5, 1)), np.tile([0, -1.0, 0], (5, 1)))
-    with pytest.raises(PluginContractError, match="'broken_test'"):
-        pipe.trace(rays)
+    with pytest.raises(PluginContractError, match="'broken_test'.*permutation"):
+        pipe.trace(rays, any_hit=any_hit)
 
 
 def test_third_party_subclass_of_trusted_builtin_is_checked(registered):
@@ -250,9 +251,10 @@ def check_calls(monkeypatch):
         monkeypatch.setattr(contract, check, spy)
     real_scatter = pipeline_module.scatter_checked
 
-    def scatter_spy(*args):
-        calls.append(("scatter_checked", "<the pipeline's traversal>"))
-        return real_scatter(*args)
+    def scatter_spy(*args, **options):
+        if options["check_hits"]:
+            calls.append(("scatter_checked", "<the pipeline's traversal>"))
+        return real_scatter(*args, **options)
 
     monkeypatch.setattr(pipeline_module, "scatter_checked", scatter_spy)
     return calls

@@ -1,7 +1,7 @@
 """``pinhole``: primary rays of a pinhole camera with jittered samples."""
 from libc.math cimport sqrt, INFINITY
 from libc.stdint cimport int32_t, uint32_t
-from raysort._rng cimport uniform
+from raysort._rng cimport seed_key, sample_key, uniform_at
 from raysort._types cimport (RS_RAY_OX, RS_RAY_DX, RS_RAY_TMIN, RS_RAY_TMAX, RS_DIM_JITTER_X,
                              RS_DIM_JITTER_Y)
 
@@ -19,6 +19,7 @@ cdef void make_rays(const float[::1] eye, const float[::1] fwd, const float[::1]
                     int width, int height, int strata, bint jitter, uint32_t seed,
                     float[:, ::1] out) noexcept nogil:
     cdef int n_pix = pixels.shape[0], s, p, i, x, y, a, stratum
+    cdef uint32_t seed_k = seed_key(seed), key
     cdef float jx, jy, sx, sy, d[3], norm
     for s in range(samples.shape[0]):
         stratum = samples[s] % (strata * strata)
@@ -26,8 +27,11 @@ cdef void make_rays(const float[::1] eye, const float[::1] fwd, const float[::1]
             i = s * n_pix + p
             x = pixels[p] % width
             y = pixels[p] // width
-            jx = uniform(seed, pixels[p], samples[s], RS_DIM_JITTER_X) if jitter else 0.5
-            jy = uniform(seed, pixels[p], samples[s], RS_DIM_JITTER_Y) if jitter else 0.5
+            jx = jy = 0.5
+            if jitter:
+                key = sample_key(seed_k, pixels[p], samples[s])
+                jx = uniform_at(key, RS_DIM_JITTER_X)
+                jy = uniform_at(key, RS_DIM_JITTER_Y)
             # stratified within the pixel when spp is a square number
             jx = (stratum % strata + jx) / strata
             jy = (stratum // strata + jy) / strata

@@ -2,11 +2,24 @@
 
 Where a new ray leaves a surface, in which direction, and how it is stored: the
 facing normal, the hit point pushed off the surface along it, a cosine-weighted
-direction around that normal, and the ray written into a batch's rows.  They are
+direction around that normal, and the rays written into a batch's rows.  They are
 compiled into each shader, so they cost no call, and every shader that uses them
 makes bit for bit the same rays.
+
+A shader gathers the hits of up to ``LANES`` rays into a :c:type:`HitBlock`
+(structure of arrays, one lane per hit) and works on the whole block in loops
+without branches that the compiler turns into SIMD code; the same IEEE operations
+run in every lane, so a hit's new rays do not depend on its lane or its block.
+New rays are written out row by row: a batch's rows lie a whole capacity apart,
+and writing a dozen of them ray by ray makes a dozen streams that share cache sets.
+
+Everything is single-precision IEEE arithmetic with no library call whose result
+could differ between C libraries: the direction's sine and cosine come from a fixed
+polynomial (``unit_circle``), so a shader compiled anywhere with contraction off
+(``-ffp-contract=off``, as setup.py builds) makes the same rays bit for bit.
 """
-from libc.math cimport sqrt, cos, sin, fabs, M_PI
+from libc.math cimport sqrtf, fabsf
+from libc.stdint cimport int32_t
 from raysort._types cimport RS_RAY_OX, RS_RAY_DX, RS_RAY_TMIN, RS_RAY_TMAX
 
 # How far a new origin is pushed off the surface: this fraction of (1 + the
@@ -15,67 +28,143 @@ from raysort._types cimport RS_RAY_OX, RS_RAY_DX, RS_RAY_TMIN, RS_RAY_TMAX
 cdef enum:
     OFFSET_DENOMINATOR = 8192
 
-
-cdef inline float offset_scale(const float *p) noexcept nogil:
-    """How far to push a new origin off the surface, relative to the coordinates."""
-    cdef float m = fabs(p[0])
-    if fabs(p[1]) > m:
-        m = fabs(p[1])
-    if fabs(p[2]) > m:
-        m = fabs(p[2])
-    return (1.0 + m) * (1.0 / OFFSET_DENOMINATOR)
+cdef enum:
+    LANES = 64          # the hits of a block
 
 
-cdef inline void leave_surface(const float[:, ::1] rays, const float[::1] t,
-                               const float[:, ::1] normals, int i, int f, float *nrm,
-                               float *o) noexcept nogil:
-    """Where ray ``i`` of a batch (the ``RS_RAY_*`` rows), which hit face ``f``
-    at ``t[i]``, goes on: the face normal turned toward the incoming ray (``nrm``) and the
-    hit point pushed off the surface along it (``o``)."""
-    cdef float sgn = 0.0, p[3], eps
-    cdef int a
+cdef struct HitBlock:
+    int n                       # lanes in use
+    int32_t ray[LANES]          # the hit ray's index in its batch
+    float t[LANES]              # its hit distance
+    float d[3][LANES]           # its direction
+    float nrm[3][LANES]         # the face normal; after leave_surfaces, facing the ray
+    float o[3][LANES]           # the ray's origin; after leave_surfaces, a new ray's
+    float u1[LANES]             # two uniform numbers for cosine_directions
+    float u2[LANES]
+    float w[3][LANES]           # a new ray's direction
+    float tmax[LANES]           # and its tmax
+
+
+cdef inline void add_hit(HitBlock *b, const float[:, ::1] rays, const float[::1] t, int i,
+                         const float *normal) noexcept nogil:
+    """Put ray ``i`` of a batch (the ``RS_RAY_*`` rows), which hit a face with this
+    ``normal``, in the next lane."""
+    cdef int h = b.n, a
+    b.ray[h] = i
+    b.t[h] = t[i]
     for a in range(3):
-        nrm[a] = normals[f, a]
-        sgn = sgn + nrm[a] * rays[RS_RAY_DX + a, i]
-    if sgn > 0:
+        b.o[a][h] = rays[RS_RAY_OX + a, i]
+        b.d[a][h] = rays[RS_RAY_DX + a, i]
+        b.nrm[a][h] = normal[a]
+    b.n = h + 1
+
+
+cdef inline void leave_surfaces(HitBlock *b) noexcept nogil:
+    """Where each hit goes on: the face normal turned toward the incoming ray and the
+    hit point pushed off the surface along it, by ``(1 + its largest coordinate) /
+    OFFSET_DENOMINATOR``."""
+    cdef int h, n = b.n
+    cdef float n0, n1, n2, p0, p1, p2, facing, m, eps
+    for h in range(n):
+        n0 = b.nrm[0][h]
+        n1 = b.nrm[1][h]
+        n2 = b.nrm[2][h]
+        facing = n0 * b.d[0][h] + n1 * b.d[1][h] + n2 * b.d[2][h]
+        n0 = -n0 if facing > 0 else n0
+        n1 = -n1 if facing > 0 else n1
+        n2 = -n2 if facing > 0 else n2
+        p0 = b.o[0][h] + b.t[h] * b.d[0][h]
+        p1 = b.o[1][h] + b.t[h] * b.d[1][h]
+        p2 = b.o[2][h] + b.t[h] * b.d[2][h]
+        m = fabsf(p0)
+        m = fabsf(p1) if fabsf(p1) > m else m
+        m = fabsf(p2) if fabsf(p2) > m else m
+        eps = (<float>1.0 + m) * <float>(1.0 / OFFSET_DENOMINATOR)
+        b.nrm[0][h] = n0
+        b.nrm[1][h] = n1
+        b.nrm[2][h] = n2
+        b.o[0][h] = p0 + eps * n0
+        b.o[1][h] = p1 + eps * n1
+        b.o[2][h] = p2 + eps * n2
+
+
+cdef inline void unit_circle(float u, float *c, float *s) noexcept nogil:
+    """The point (``c``, ``s``) of the unit circle at the angle ``2 pi u - pi / 4``, for
+    ``u`` in [0, 1): uniform ``u`` gives a uniform angle over a whole turn.
+
+    ``4u`` splits exactly into a quadrant ``q`` and an offset in it; the offset is an
+    angle in [-pi/4, pi/4), where Cephes' single-precision minimax polynomials for sin
+    and cos (``sinf.c``, S. L. Moshier) are accurate to about one ulp, and swapping and
+    negating them turns the point by ``q`` quarter turns (exact)."""
+    cdef float v = u * <float>4.0
+    cdef int q = <int>v
+    cdef float x = (v - <float>q - <float>0.5) * <float>1.5707963267948966
+    cdef float z = x * x
+    cdef float sin_x = ((<float>-1.9515295891e-4 * z + <float>8.3321608736e-3) * z
+                        - <float>1.6666654611e-1) * z * x + x
+    cdef float cos_x = (((<float>2.443315711809948e-5 * z - <float>1.388731625493765e-3) * z
+                         + <float>4.166664568298827e-2) * z * z - <float>0.5 * z) + <float>1.0
+    # (cos, sin) of x + q quarter turns: (c, s), (-s, c), (-c, -s), (s, -c)
+    cdef float a = sin_x if q & 1 else cos_x
+    cdef float b = cos_x if q & 1 else sin_x
+    c[0] = -a if q == 1 or q == 2 else a
+    s[0] = -b if q >= 2 else b
+
+
+cdef inline void cosine_directions(HitBlock *b) noexcept nogil:
+    """A cosine-weighted direction ``w`` around each (unit, facing) normal from the lane's
+    ``u1``, ``u2`` in [0, 1): ``cos(angle to the normal) = sqrt(1 - u1)``, so it is never
+    tangent, and the azimuth is ``unit_circle(u2)``.  The tangent frame is Duff et al.
+    2017's branchless orthonormal basis; ``tmax`` is left to the caller."""
+    cdef int h, n = b.n
+    cdef float n0, n1, n2, u1, r, along, sgn, aa, bb, cos_phi, sin_phi, x, y
+    for h in range(n):
+        n0 = b.nrm[0][h]
+        n1 = b.nrm[1][h]
+        n2 = b.nrm[2][h]
+        u1 = b.u1[h]
+        r = sqrtf(u1)
+        along = sqrtf(<float>1.0 - u1)
+        sgn = <float>1.0 if n2 >= 0 else <float>-1.0
+        aa = <float>-1.0 / (sgn + n2)
+        bb = n0 * n1 * aa
+        unit_circle(b.u2[h], &cos_phi, &sin_phi)
+        x = r * cos_phi
+        y = r * sin_phi
+        # x * tangent + y * bitangent + along * normal, the basis written out
+        b.w[0][h] = x * (<float>1.0 + sgn * n0 * n0 * aa) + y * bb + along * n0
+        b.w[1][h] = x * (sgn * bb) + y * (sgn + n1 * n1 * aa) + along * n1
+        b.w[2][h] = x * (-sgn * n0) - y * n1 + along * n2
+
+
+cdef inline void write_rays(const HitBlock *b, const int32_t *sel, int count,
+                            float[:, ::1] out, int k, int step) noexcept nogil:
+    """Write the new rays (``o``, ``w``, 0, ``tmax``) of lanes ``sel[:count]`` (ascending)
+    as rays ``k, k + step, k + 2 step, ...`` of a batch's rows."""
+    cdef int a, j
+    cdef float *row
+    if count == b.n:       # every lane: sel is 0, 1, 2, ...
         for a in range(3):
-            nrm[a] = -nrm[a]
-    for a in range(3):
-        p[a] = rays[RS_RAY_OX + a, i] + t[i] * rays[RS_RAY_DX + a, i]
-    eps = offset_scale(p)
-    for a in range(3):
-        o[a] = p[a] + eps * nrm[a]
-
-
-cdef inline void store_ray(float[:, ::1] out, int k, const float *o, const float *w,
-                           float tmax) noexcept nogil:
-    """Write ray ``k`` of a batch's rows: origin ``o``, direction ``w``, (0, ``tmax``)."""
-    cdef int a
-    for a in range(3):
-        out[RS_RAY_OX + a, k] = o[a]
-        out[RS_RAY_DX + a, k] = w[a]
-    out[RS_RAY_TMIN, k] = 0.0
-    out[RS_RAY_TMAX, k] = tmax
-
-
-cdef inline void cosine_direction(const float *nrm, float u1, float u2,
-                                  float *w) noexcept nogil:
-    """A cosine-weighted direction ``w`` around the unit normal ``nrm`` from two uniform
-    numbers in [0, 1): ``cos(angle to nrm) = sqrt(1 - u1)``, so it is never tangent.
-    The tangent frame is Duff et al. 2017's branchless orthonormal basis."""
-    cdef float r = sqrt(u1)
-    cdef float phi = 2.0 * M_PI * u2
-    cdef float sgn = 1.0 if nrm[2] >= 0 else -1.0
-    cdef float aa = -1.0 / (sgn + nrm[2])
-    cdef float bb = nrm[0] * nrm[1] * aa
-    cdef float tx[3], ty[3]
-    cdef double cos_phi = cos(phi), sin_phi = sin(phi), along = sqrt(1.0 - u1)
-    cdef int a
-    tx[0] = 1.0 + sgn * nrm[0] * nrm[0] * aa
-    tx[1] = sgn * bb
-    tx[2] = -sgn * nrm[0]
-    ty[0] = bb
-    ty[1] = sgn + nrm[1] * nrm[1] * aa
-    ty[2] = -nrm[1]
-    for a in range(3):
-        w[a] = r * cos_phi * tx[a] + r * sin_phi * ty[a] + along * nrm[a]
+            row = &out[RS_RAY_OX + a, k]
+            for j in range(count):
+                row[j * step] = b.o[a][j]
+            row = &out[RS_RAY_DX + a, k]
+            for j in range(count):
+                row[j * step] = b.w[a][j]
+        row = &out[RS_RAY_TMAX, k]
+        for j in range(count):
+            row[j * step] = b.tmax[j]
+    else:
+        for a in range(3):
+            row = &out[RS_RAY_OX + a, k]
+            for j in range(count):
+                row[j * step] = b.o[a][sel[j]]
+            row = &out[RS_RAY_DX + a, k]
+            for j in range(count):
+                row[j * step] = b.w[a][sel[j]]
+        row = &out[RS_RAY_TMAX, k]
+        for j in range(count):
+            row[j * step] = b.tmax[sel[j]]
+    row = &out[RS_RAY_TMIN, k]
+    for j in range(count):
+        row[j * step] = 0.0

@@ -6,9 +6,10 @@ efficiency of ray traversal on GPUs", HPG 2009, and most ray-sorting work since)
 any-hit rays, cosine distributed around the surface normal, from every primary hit.
 """
 from libc.stdint cimport int32_t, uint32_t
-from raysort._rng cimport uniform
+from raysort._rng cimport seed_key, sample_key, uniform_at
 from raysort._types cimport RS_DIM_AO
-from raysort.shaders._shading cimport leave_surface, cosine_direction, store_ray
+from raysort.shaders._shading cimport (LANES, HitBlock, add_hit, leave_surfaces,
+                                       cosine_directions, write_rays)
 
 import numpy as np
 
@@ -35,24 +36,44 @@ cdef int ao_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::
                   double[:, ::1] radiance, float[:, ::1] ao_rays, int32_t[::1] ao_parent,
                   int32_t[::1] ao_slot, float[:, ::1] ao_weight) noexcept nogil:
     """Make ``samples`` AO rays per hit (misses add the background); returns how many."""
-    cdef int n = prim.shape[0], i, f, c, k, m = 0
-    cdef float nrm[3], o[3], w[3]
-    for i in range(n):
-        f = prim[i]
-        if f < 0:
-            for c in range(3):
-                radiance[slot[i], c] += thr[c, i] * background
+    cdef int n = prim.shape[0], blk, i0, i, f, c, h, k, m = 0
+    cdef uint32_t seed_k = seed_key(seed)
+    cdef HitBlock b
+    cdef uint32_t key[LANES]
+    cdef int32_t sel[LANES]
+    for h in range(LANES):
+        sel[h] = h
+    for blk in range((n + LANES - 1) // LANES):
+        i0 = blk * LANES
+        b.n = 0
+        for i in range(i0, min(i0 + LANES, n)):
+            f = prim[i]
+            if f < 0:
+                for c in range(3):
+                    radiance[slot[i], c] += thr[c, i] * background
+                continue
+            key[b.n] = sample_key(seed_k, pixel[i], sample[i])
+            add_hit(&b, rays, t, i, &normals[f, 0])
+        if b.n == 0:
             continue
-        leave_surface(rays, t, normals, i, f, nrm, o)
+        leave_surfaces(&b)
+        for h in range(b.n):
+            b.tmax[h] = distance
+        # the samples of a hit are consecutive rays (their parents ascend)
         for k in range(samples):
-            cosine_direction(nrm, uniform(seed, pixel[i], sample[i], RS_DIM_AO + 2 * k),
-                             uniform(seed, pixel[i], sample[i], RS_DIM_AO + 2 * k + 1), w)
-            store_ray(ao_rays, m, o, w, distance)
-            for c in range(3):
-                ao_weight[c, m] = thr[c, i] / samples
-            ao_parent[m] = i
-            ao_slot[m] = slot[i]
-            m += 1
+            for h in range(b.n):
+                b.u1[h] = uniform_at(key[h], RS_DIM_AO + 2 * k)
+                b.u2[h] = uniform_at(key[h], RS_DIM_AO + 2 * k + 1)
+            cosine_directions(&b)
+            write_rays(&b, sel, b.n, ao_rays, m + k, samples)
+        for h in range(b.n):
+            i = b.ray[h]
+            for k in range(samples):
+                for c in range(3):
+                    ao_weight[c, m + k] = thr[c, i] / samples
+                ao_parent[m + k] = i
+                ao_slot[m + k] = slot[i]
+            m += samples
     return m
 
 

@@ -1,20 +1,30 @@
 """``lambert``: a Lambertian path tracer (cosine-weighted diffuse bounces)."""
-from libc.math cimport sqrt, M_PI, INFINITY
+from libc.math cimport sqrtf, M_PI, INFINITY
 from libc.stdint cimport int32_t, uint32_t
-from raysort._rng cimport uniform
+from raysort._rng cimport seed_key, sample_key, uniform_at
 from raysort._types cimport RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH, rs_prefetch
-from raysort.shaders._shading cimport leave_surface, cosine_direction, store_ray
+from raysort.shaders._shading cimport (LANES, HitBlock, add_hit, leave_surfaces,
+                                       cosine_directions, write_rays)
 
 import numpy as np
 
 from raysort.params import boolean, integer
 from raysort.paths import Bounce, ShadowRays
 from raysort.plugin import Shader
-from raysort.rays import RayBatch
+from raysort.rays import RayBatch, aligned_empty
 
 
 cdef enum:
-    PREFETCH_AHEAD = 8      # rays between a face-data prefetch and its use
+    PREFETCH_AHEAD = 16     # rays between a face-data prefetch and its use
+
+# A face's shading data in one cache line (a hit is one random access): its geometric
+# normal, albedo and emission, each padded to four floats, and whether it emits.
+cdef enum:
+    FACE_NORMAL = 0
+    FACE_ALBEDO = 4
+    FACE_EMISSION = 8
+    FACE_EMITS = 11         # 1 if any channel of the emission is not zero, else 0
+    FACE_FLOATS = 16
 
 
 cdef struct ShadeParams:
@@ -23,12 +33,10 @@ cdef struct ShadeParams:
     uint32_t seed
     bint russian_roulette
     int rr_depth
-    bint emissive
 
 
 cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
-                      const float[:, ::1] normals, const float[:, ::1] albedo,
-                      const float[:, ::1] emission, const float[::1] sky,
+                      const float[:, ::1] faces, const float[::1] sky,
                       const int32_t[::1] pixel, const int32_t[::1] sample,
                       const int32_t[::1] slot, const float[:, ::1] thr, ShadeParams prm,
                       const float[:, ::1] light_pos, const float[:, ::1] light_int,
@@ -36,88 +44,131 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                       float[:, ::1] next_rays, int32_t[::1] next_parent, float[:, ::1] next_thr,
                       float[:, ::1] sh_rays, int32_t[::1] sh_parent, int32_t[::1] sh_slot,
                       float[:, ::1] sh_contrib, int *n_next, int *n_shadow) noexcept nogil:
-    cdef int n = prim.shape[0], i, f, a, c, k = 0, m = 0, L
+    cdef int n = prim.shape[0], blk, i0, i, f, c, h, j, L, count, k = 0, m = 0
     cdef uint32_t dim = RS_DIM_BOUNCE + RS_DIMS_PER_BOUNCE * prm.depth   # types.h's budget
-    cdef float nrm[3], o[3], w[3], u1, u2, q
-    cdef float cosl, dist2, dist, wl[3], best
-    for i in range(n):
-        if i + PREFETCH_AHEAD < n and prim[i + PREFETCH_AHEAD] >= 0:
-            # the face data of a ray further on, which its hit makes a random access
-            f = prim[i + PREFETCH_AHEAD]
-            rs_prefetch(&normals[f, 0])
-            rs_prefetch(&albedo[f, 0])
-            if prm.emissive:
-                rs_prefetch(&emission[f, 0])
-        f = prim[i]
-        if f < 0:
+    cdef uint32_t seed_k = seed_key(prm.seed)
+    cdef bint bounce = prm.depth < prm.max_depth
+    cdef bint roulette = bounce and prm.russian_roulette and prm.depth >= prm.rr_depth
+    cdef float inv_pi = <float>(1.0 / M_PI)
+    cdef float w0, w1, w2, dist2, cosl, dist, inv_dist, q, best, lx, ly, lz, intensity
+    cdef HitBlock b
+    cdef float reflect[3][LANES]       # the path's weight after this bounce (thr * albedo)
+    cdef float weight[LANES]           # a shadow ray's BRDF * cosine / distance^2
+    cdef uint32_t key[LANES]           # the path's random-number key
+    cdef int32_t ok[LANES]             # 1 where the lane's shadow ray is made
+    cdef int32_t sel[LANES]            # the lanes that make a ray, ascending
+    cdef float *row
+    for blk in range((n + LANES - 1) // LANES):
+        i0 = blk * LANES
+        # the hits of the next LANES rays into a block; misses add the sky, emitters their light
+        b.n = 0
+        for i in range(i0, min(i0 + LANES, n)):
+            if i + PREFETCH_AHEAD < n and prim[i + PREFETCH_AHEAD] >= 0:
+                # the face data of a ray further on, which its hit makes a random access
+                rs_prefetch(&faces[prim[i + PREFETCH_AHEAD], 0])
+            f = prim[i]
+            if f < 0:
+                for c in range(3):
+                    radiance[slot[i], c] += thr[c, i] * sky[c]
+                continue
+            if faces[f, FACE_EMITS] != 0:
+                for c in range(3):
+                    radiance[slot[i], c] += thr[c, i] * faces[f, FACE_EMISSION + c]
+            h = b.n
             for c in range(3):
-                radiance[slot[i], c] += thr[c, i] * sky[c]
+                reflect[c][h] = thr[c, i] * faces[f, FACE_ALBEDO + c]
+            if bounce:
+                key[h] = sample_key(seed_k, pixel[i], sample[i])
+            add_hit(&b, rays, t, i, &faces[f, FACE_NORMAL])
+        if b.n == 0:
             continue
-        if prm.emissive:
-            for c in range(3):
-                radiance[slot[i], c] += thr[c, i] * emission[f, c]
-        # facing geometric normal and the hit point, pushed off the surface
-        leave_surface(rays, t, normals, i, f, nrm, o)
-        # next-event estimation toward point lights (shadow rays)
+        leave_surfaces(&b)
+        # next-event estimation toward point lights: a shadow ray per lit hit
         for L in range(light_pos.shape[0]):
-            dist2 = 0.0
-            for a in range(3):
-                wl[a] = light_pos[L, a] - o[a]
-                dist2 = dist2 + wl[a] * wl[a]
-            dist = sqrt(dist2)
-            cosl = 0.0
-            for a in range(3):
-                wl[a] = wl[a] / dist
-                cosl = cosl + wl[a] * nrm[a]
-            if cosl <= 0 or dist2 == 0:
+            lx = light_pos[L, 0]
+            ly = light_pos[L, 1]
+            lz = light_pos[L, 2]
+            for h in range(b.n):
+                w0 = lx - b.o[0][h]
+                w1 = ly - b.o[1][h]
+                w2 = lz - b.o[2][h]
+                dist2 = w0 * w0 + w1 * w1 + w2 * w2
+                cosl = w0 * b.nrm[0][h] + w1 * b.nrm[1][h] + w2 * b.nrm[2][h]
+                ok[h] = (cosl > 0) & (dist2 > 0)      # not behind the surface, not at the light
+                dist = sqrtf(dist2)
+                inv_dist = <float>1.0 / dist
+                b.w[0][h] = w0 * inv_dist
+                b.w[1][h] = w1 * inv_dist
+                b.w[2][h] = w2 * inv_dist
+                b.tmax[h] = dist
+                # BRDF (albedo / pi) * cos(light, normal) / distance^2
+                weight[h] = cosl * inv_dist * inv_pi / dist2
+            count = 0
+            for h in range(b.n):
+                sel[count] = h
+                count += ok[h]
+            if count == 0:
                 continue
-            store_ray(sh_rays, m, o, wl, dist)
+            write_rays(&b, sel, count, sh_rays, m, 1)
             for c in range(3):
-                sh_contrib[c, m] = (thr[c, i] * albedo[f, c] * (1.0 / M_PI) * cosl
-                                    * light_int[L, c] / dist2)
-            sh_parent[m] = i
-            sh_slot[m] = slot[i]
-            m += 1
-        if prm.depth >= prm.max_depth:
+                intensity = light_int[L, c]
+                row = &sh_contrib[c, m]
+                for j in range(count):
+                    row[j] = reflect[c][sel[j]] * intensity * weight[sel[j]]
+            for j in range(count):
+                sh_parent[m + j] = b.ray[sel[j]]
+                sh_slot[m + j] = slot[b.ray[sel[j]]]
+            m += count
+        if not bounce:
             continue
-        # Russian roulette (off by default)
-        q = 1.0
-        if prm.russian_roulette and prm.depth >= prm.rr_depth:
-            best = thr[0, i] * albedo[f, 0]
-            for c in range(1, 3):
-                if thr[c, i] * albedo[f, c] > best:
-                    best = thr[c, i] * albedo[f, c]
-            q = best if best < 0.95 else 0.95
-            if uniform(prm.seed, pixel[i], sample[i], dim + 2) >= q:
-                continue
-        # cosine-weighted direction around the normal
-        u1 = uniform(prm.seed, pixel[i], sample[i], dim)
-        u2 = uniform(prm.seed, pixel[i], sample[i], dim + 1)
-        cosine_direction(nrm, u1, u2, w)
-        store_ray(next_rays, k, o, w, INFINITY)
+        # a cosine-weighted bounce per hit (per survivor of Russian roulette, off by default)
+        for h in range(b.n):
+            b.u1[h] = uniform_at(key[h], dim)
+            b.u2[h] = uniform_at(key[h], dim + 1)
+            b.tmax[h] = INFINITY
+        cosine_directions(&b)
+        count = 0
+        for h in range(b.n):
+            if roulette:
+                best = reflect[0][h]
+                for c in range(1, 3):
+                    if reflect[c][h] > best:
+                        best = reflect[c][h]
+                q = best if best < <float>0.95 else <float>0.95
+                if uniform_at(key[h], dim + 2) >= q:
+                    continue
+                for c in range(3):
+                    reflect[c][h] = reflect[c][h] / q
+            sel[count] = h
+            count += 1
+        if count == 0:
+            continue
+        write_rays(&b, sel, count, next_rays, k, 1)
         for c in range(3):
-            next_thr[c, k] = thr[c, i] * albedo[f, c] / q
-        next_parent[k] = i
-        k += 1
+            row = &next_thr[c, k]
+            for j in range(count):
+                row[j] = reflect[c][sel[j]]
+        for j in range(count):
+            next_parent[k + j] = b.ray[sel[j]]
+        k += count
     n_next[0] = k
     n_shadow[0] = m
 
 
 def _shade(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
-           const float[:, ::1] normals, const float[:, ::1] albedo, const float[:, ::1] emission,
-           const float[::1] sky, const int32_t[::1] pixel, const int32_t[::1] sample,
-           const int32_t[::1] slot, const float[:, ::1] thr, int depth, int max_depth,
-           uint32_t seed, bint russian_roulette, int rr_depth, bint emissive,
+           const float[:, ::1] faces, const float[::1] sky, const int32_t[::1] pixel,
+           const int32_t[::1] sample, const int32_t[::1] slot, const float[:, ::1] thr,
+           int depth, int max_depth,
+           uint32_t seed, bint russian_roulette, int rr_depth,
            const float[:, ::1] light_pos, const float[:, ::1] light_int,
            double[:, ::1] radiance, float[:, ::1] next_rays, int32_t[::1] next_parent,
            float[:, ::1] next_thr, float[:, ::1] sh_rays, int32_t[::1] sh_parent,
            int32_t[::1] sh_slot, float[:, ::1] sh_contrib):
     """Typed entry point: shade a batch without the GIL; returns (next rays, shadow rays)."""
-    cdef ShadeParams prm = ShadeParams(depth, max_depth, seed, russian_roulette, rr_depth,
-                                       emissive)
+    cdef ShadeParams prm = ShadeParams(depth, max_depth, seed, russian_roulette, rr_depth)
     cdef int k = 0, m = 0
     with nogil:
-        shade_batch(rays, t, prim, normals, albedo, emission, sky, pixel, sample, slot, thr,
+        shade_batch(rays, t, prim, faces, sky, pixel, sample, slot, thr,
                     prm, light_pos, light_int, radiance, next_rays, next_parent, next_thr,
                     sh_rays, sh_parent, sh_slot, sh_contrib, &k, &m)
     return k, m
@@ -156,19 +207,25 @@ class LambertShader(Shader):
         self._prepared = None
 
     def prepare(self, scene):
+        """Cache the scene's face records and lights (``render`` calls this first)."""
         lights = scene.lights if self.shadow_rays in (None, True) else []
+        faces = aligned_empty((len(scene.faces), FACE_FLOATS), np.float32, FACE_FLOATS * 4)
+        faces[:] = 0.0
+        faces[:, FACE_NORMAL:FACE_NORMAL + 3] = scene.face_normals()
+        faces[:, FACE_ALBEDO:FACE_ALBEDO + 3] = scene.albedo
+        faces[:, FACE_EMISSION:FACE_EMISSION + 3] = scene.emission
+        faces[:, FACE_EMITS] = (scene.emission != 0).any(axis=1)
         self._prepared = (
             scene,
-            scene.face_normals(),
+            faces,
             np.ascontiguousarray([lt.position for lt in lights], dtype=np.float32).reshape(-1, 3),
             np.ascontiguousarray([lt.intensity for lt in lights], dtype=np.float32).reshape(-1, 3),
-            bool(scene.emission.any()),
         )
 
     def shade(self, scene, rays, hits, paths, depth, seed, radiance):
         if self._prepared is None or self._prepared[0] is not scene:
             self.prepare(scene)
-        _, normals, light_pos, light_int, emissive = self._prepared
+        _, faces, light_pos, light_int = self._prepared
         n = len(rays)
         next_rays = RayBatch(n)
         next_parent = np.empty(n, dtype=np.int32)
@@ -178,10 +235,9 @@ class LambertShader(Shader):
         sh_parent = np.empty(m_max, dtype=np.int32)
         sh_slot = np.empty(m_max, dtype=np.int32)
         sh_contrib = np.empty((3, m_max), dtype=np.float32)
-        k, m = _shade(rays.data, hits.t, hits.prim, normals, scene.albedo, scene.emission,
-                      scene.sky, paths.pixel, paths.sample, paths.slot, paths.throughput,
-                      depth, self.max_depth, seed & 0xFFFFFFFF, self.russian_roulette,
-                      self.rr_depth, emissive, light_pos, light_int,
+        k, m = _shade(rays.data, hits.t, hits.prim, faces, scene.sky, paths.pixel,
+                      paths.sample, paths.slot, paths.throughput, depth, self.max_depth,
+                      seed & 0xFFFFFFFF, self.russian_roulette, self.rr_depth, light_pos, light_int,
                       radiance, next_rays.data, next_parent, next_thr, sh_rays.data,
                       sh_parent, sh_slot, sh_contrib)
         shadow = None

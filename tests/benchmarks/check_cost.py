@@ -31,17 +31,17 @@ from raysort.scene import load_scene
 
 def captured_frame(pipe, size, spp):
     """Render one frame, recording the arguments of every gather and scatter call;
-    returns (frame CPU seconds, [(gather args, traversal args, any_hit)])."""
+    returns (frame CPU seconds, [(gather args, scatter args)])."""
     calls, gathered = [], {}
 
-    def gather(rays, order, offsets, packets, keep_tmax=False, check_order=True):
-        out = rays_module.gather_checked(rays, order, offsets, packets, keep_tmax, check_order)
+    def gather(rays, order, offsets, packets, **options):
         gathered["last"] = (rays, order, offsets, packets)
-        return out
+        return rays_module.gather_checked(rays, order, offsets, packets, **options)
 
-    def scatter(batch, order, offsets, tmax, n_prim, any_hit):
-        calls.append((gathered["last"], (batch, tmax, n_prim), any_hit))
-        return rays_module.scatter_checked(batch, order, offsets, tmax, n_prim, any_hit)
+    def scatter(batch, order, offsets, tmax, n_prim, any_hit, **options):
+        calls.append((gathered["last"], (batch, tmax, n_prim, any_hit)))
+        return rays_module.scatter_checked(batch, order, offsets, tmax, n_prim, any_hit,
+                                           **options)
 
     real = pipeline_module.gather_checked, pipeline_module.scatter_checked
     pipeline_module.gather_checked, pipeline_module.scatter_checked = gather, scatter
@@ -56,16 +56,12 @@ def captured_frame(pipe, size, spp):
 def replay(calls, checked):
     """Thread-CPU seconds of the frame's gathers and scatters, with or without checks."""
     spent = 0.0
-    for (rays, order, offsets, packets), (batch, tmax, n_prim), any_hit in calls:
+    for (rays, order, offsets, packets), (batch, tmax, n_prim, any_hit) in calls:
         start = time.thread_time()
         rays_module.gather_checked(rays, order, offsets, packets,
                                    keep_tmax=checked and not any_hit, check_order=checked)
-        if checked:
-            rays_module.scatter_checked(batch, order, offsets, tmax, n_prim, any_hit)
-        elif any_hit:
-            rays_module.scatter_occluded(batch, len(order))
-        else:
-            rays_module.scatter(batch, len(order))
+        rays_module.scatter_checked(batch, order, offsets, tmax, n_prim, any_hit,
+                                    check_hits=checked, check_order=checked)
         spent += time.thread_time() - start
     return spent
 

@@ -1,0 +1,71 @@
+"""The ``lambert`` shader's bounce directions, held against the cosine law they must follow.
+
+A Lambertian path tracer that samples the BRDF must send its bounce rays in directions
+whose density is cos(theta) / pi over the hemisphere of the facing normal: then
+cos^2(theta) is uniform on (0, 1] and the azimuth is uniform on a whole turn, jointly.
+The directions come from a real render (the ``diffuse`` workload of the Cornell box, many
+normals); the normals from the scene's faces and brute-force hits, independently of the
+shader.  The furnace and the analytic images (tests/test_pipeline.py) check the weights.
+"""
+import numpy as np
+import pytest
+
+import raysort
+from raysort.reference import brute_force
+from raysort.workloads import workload
+
+SIZE = dict(width=64, height=64, spp=8, seed=11, tile=32)
+COS2_BINS, PHI_BINS = 10, 12
+
+
+@pytest.fixture(scope="module")
+def bounce():
+    """(directions, facing normals), float64 (3, n), of the first bounce of a render."""
+    cornell = raysort.load_scene("cornell")
+    primary = workload(cornell, "primary", **SIZE)
+    rays = workload(cornell, "diffuse", **SIZE).rays
+    hits = brute_force(cornell.vertices, cornell.faces, primary.rays)
+    hit = np.flatnonzero(hits.prim >= 0)
+    assert len(rays) == len(hit) > 20_000
+    nrm = cornell.face_normals()[hits.prim[hit]].T.astype(np.float64)
+    nrm *= np.where((nrm * primary.rays.directions[:, hit]).sum(axis=0) > 0, -1.0, 1.0)
+    return rays.directions.astype(np.float64), nrm
+
+
+def cos2_and_azimuth(directions, nrm):
+    """cos^2 of the angle to the normal, and the azimuth in a tangent frame of our own."""
+    helper = np.where(np.abs(nrm[0]) < 0.9, [[1.0], [0.0], [0.0]], [[0.0], [1.0], [0.0]])
+    t1 = np.cross(helper.T, nrm.T).T
+    t1 /= np.linalg.norm(t1, axis=0)
+    t2 = np.cross(nrm.T, t1.T).T
+    cos = (directions * nrm).sum(axis=0)
+    phi = np.arctan2((directions * t2).sum(axis=0), (directions * t1).sum(axis=0))
+    return cos, cos * cos, phi
+
+
+def chi_square(a, b):
+    """Pearson's statistic of the joint histogram of a in [0, 1] and b in [-pi, pi]
+    against the uniform one, and its degrees of freedom."""
+    i = np.minimum((a * COS2_BINS).astype(int), COS2_BINS - 1)
+    j = np.minimum(((b + np.pi) / (2 * np.pi) * PHI_BINS).astype(int), PHI_BINS - 1)
+    counts = np.bincount(i * PHI_BINS + j, minlength=COS2_BINS * PHI_BINS)
+    expected = len(a) / (COS2_BINS * PHI_BINS)
+    return ((counts - expected) ** 2 / expected).sum(), COS2_BINS * PHI_BINS - 1
+
+
+def test_bounce_directions_are_unit_length(bounce):
+    directions, _ = bounce
+    np.testing.assert_allclose(np.linalg.norm(directions, axis=0), 1.0, rtol=0, atol=1e-6)
+
+
+def test_bounce_directions_are_cosine_distributed(bounce):
+    """cos^2(theta) and the azimuth are jointly uniform: a chi-square over 10 x 12 bins
+    stays within six standard deviations of its mean (a generous bound for a fixed seed),
+    while cos(theta), which is not uniform under the cosine law, fails the same test."""
+    cos, cos2, phi = cos2_and_azimuth(*bounce)
+    assert (cos > 0).all()
+    stat, dof = chi_square(cos2, phi)
+    bound = dof + 6 * np.sqrt(2 * dof)
+    assert stat < bound
+    wrong, _ = chi_square(cos, phi)       # what a uniform-hemisphere sampler would pass
+    assert wrong > 10 * bound
