@@ -2,8 +2,10 @@
 
 Shared by ``origin_direction``, ``two_point``, ``termination`` and ``garanzha``
 (see those modules for the keys and their papers); built per ISA and called
-through :func:`raysort.isa.module` like every kernel.  A key is built in one pass
-over the rays:
+through :func:`raysort.isa.module` like every kernel.  The keys of a large
+packet are made just before it is sorted (they are still in the cache then),
+``BLOCK`` rays at a time, each step one loop over the block that the compiler
+vectorises:
 
 1. every ray gives up to six coordinates in [0, 1] (``coordinates`` below):
    the origin normalised to the scene box, then either the unit direction's
@@ -18,7 +20,9 @@ over the rays:
 Keys are left aligned in a uint64: the sort looks at the top ``8 * digits``
 bits.  Within every large packet, ``(key, ray)`` pairs are sorted by a stable
 LSD radix sort on bytes (a pass whose byte is the same for every key is
-skipped), optionally after Garanzha and Loop's compression: runs of equal keys
+skipped; the ray's index rides in the key's low bits, which the sort does not
+look at, whenever they have room for it), optionally after Garanzha and Loop's
+compression: runs of equal keys
 in input order become one chunk, only chunks are sorted, and the runs are
 copied back in chunk order (the result is the same order; the work is on
 fewer items when the input has long runs).  The sorted run is then cut into
@@ -43,6 +47,7 @@ from raysort.sdk import MAX_PACKET, ConfigError, Sorter, boolean, check_packets,
 COORD_BITS = 16
 cdef enum:
     KEY_COORDS = 6          # most coordinates a key draws from
+    TABLE_ROW = 256         # entries of a key table row: one per value of a coordinate byte
 #: most coordinates a key draws from
 MAX_COORDS = KEY_COORDS
 
@@ -195,7 +200,12 @@ cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcep
     cdef float c[KEY_COORDS * BLOCK]
     cdef int32_t q[KEY_COORDS * BLOCK]
     cdef uint64_t *kb
-    cdef const uint64_t *table = a.table
+    # the table's rows (see key_table): coordinate k's low byte, then its high byte
+    cdef const uint64_t *low[KEY_COORDS]
+    cdef const uint64_t *high[KEY_COORDS]
+    for k in range(KEY_COORDS):
+        low[k] = a.table + (2 * k) * TABLE_ROW
+        high[k] = a.table + (2 * k + 1) * TABLE_ROW
     b = start
     while b < start + n:
         m = min(<int> BLOCK, start + n - b)
@@ -206,26 +216,20 @@ cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcep
         kb = keys + (b - start)
         if not a.low_bytes and n_coords == 6:   # the common short key: one loop, no stores
             for j in range(m):
-                kb[j] = (table[1 * 256 + (q[0 * BLOCK + j] >> 8)]
-                         | table[3 * 256 + (q[1 * BLOCK + j] >> 8)]
-                         | table[5 * 256 + (q[2 * BLOCK + j] >> 8)]
-                         | table[7 * 256 + (q[3 * BLOCK + j] >> 8)]
-                         | table[9 * 256 + (q[4 * BLOCK + j] >> 8)]
-                         | table[11 * 256 + (q[5 * BLOCK + j] >> 8)])
+                kb[j] = (high[0][q[j] >> 8] | high[1][q[BLOCK + j] >> 8]
+                         | high[2][q[2 * BLOCK + j] >> 8] | high[3][q[3 * BLOCK + j] >> 8]
+                         | high[4][q[4 * BLOCK + j] >> 8] | high[5][q[5 * BLOCK + j] >> 8])
         elif not a.low_bytes:
             for j in range(m):
-                kb[j] = (table[1 * 256 + (q[0 * BLOCK + j] >> 8)]
-                         | table[3 * 256 + (q[1 * BLOCK + j] >> 8)]
-                         | table[5 * 256 + (q[2 * BLOCK + j] >> 8)]
-                         | table[7 * 256 + (q[3 * BLOCK + j] >> 8)]
-                         | table[9 * 256 + (q[4 * BLOCK + j] >> 8)])
+                kb[j] = (high[0][q[j] >> 8] | high[1][q[BLOCK + j] >> 8]
+                         | high[2][q[2 * BLOCK + j] >> 8] | high[3][q[3 * BLOCK + j] >> 8]
+                         | high[4][q[4 * BLOCK + j] >> 8])
         else:                   # a long key: both bytes of every coordinate
             for j in range(m):
                 kb[j] = 0
             for k in range(n_coords):
                 for j in range(m):
-                    kb[j] |= (table[(2 * k) * 256 + (q[k * BLOCK + j] & 255)]
-                              | table[(2 * k + 1) * 256 + (q[k * BLOCK + j] >> 8)])
+                    kb[j] |= low[k][q[k * BLOCK + j] & 255] | high[k][q[k * BLOCK + j] >> 8]
         if a.octant:            # the direction's octant first (bit k: d[k] < 0)
             for j in range(m):
                 kb[j] = (kb[j] >> 3 | <uint64_t> (a.d[0][b + j] < 0) << 63

@@ -173,7 +173,7 @@ def main(argv=None):
         for r in rows:
             flag = "" if r["identical_hits"] else "  HITS DIFFER"
             over = "  > 10 %" if r["share"]["median"] > BUDGET else ""
-            print(f"{r['sorter']:18s}{r['traversal']:10s}{spread_ms(r['sort']):>22s}"
+            print(f"{r['sorter']:17s} {r['traversal']:10s}{spread_ms(r['sort']):>22s}"
                   f"{spread_ms(r['gather']):>22s}{spread_ms(r['trace']):>24s}   "
                   f"{spread_pct(r['share'])}{over}{flag}")
         sys.stdout.flush()
