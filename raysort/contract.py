@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import numbers
 import operator
-from dataclasses import fields
 
 import numpy as np
 
@@ -29,7 +28,7 @@ from raysort.errors import ConfigError, PluginContractError, PluginError
 from raysort.paths import Bounce, ShadowRays
 from raysort.rays import (MAX_PACKET, MAX_RAYS, PACKET_ROWS, RAY_ROWS, PacketRow, RayBatch,
                           RayRow)
-from raysort.stats import Counters
+from raysort.stats import WHOLE_NUMBERS, Counters
 
 __all__ = ["check_packets", "check_ray_batch", "sort_arrays", "check_sort", "check_hits",
            "check_packet_arrays", "packet_arrays", "check_rays", "check_counters", "check_generated",
@@ -45,7 +44,7 @@ def _kernels():
 _TMIN, _ORIGIN, _DIRECTION = RayRow.tmin, RayRow.ox, RayRow.dx     # three rows each
 _LANE_TMIN, _LANE_T = PacketRow.tmin, PacketRow.t
 _PACKET_ARRAYS = ("rows", "prim", "u", "v", "index", "starts", "counts")
-_COUNTER_FIELDS = tuple(f.name for f in fields(Counters) if f.name != "available")
+_COUNTER_FIELDS = WHOLE_NUMBERS
 _KIND_WORD = {"generators": "generator", "sorters": "sorter", "traversals": "traversal",
               "shaders": "shader"}
 
@@ -343,21 +342,31 @@ _COUNTER_VALUES = operator.attrgetter(*_COUNTER_FIELDS)
 
 
 def check_counters(plugin, counters):
-    """A traversal's :class:`Counters`: whole numbers >= 0 and a bool ``available``."""
+    """A traversal's :class:`Counters`: whole numbers >= 0, a bool ``available`` and a
+    tuple of whole numbers >= 0 as ``stream_level_rays``."""
     if type(counters) is Counters and type(counters.available) is bool:
-        values = _COUNTER_VALUES(counters)
+        values = _COUNTER_VALUES(counters) + counters.stream_level_rays \
+            if type(counters.stream_level_rays) is tuple else ("",)
         if set(map(type, values)) == {int} and min(values) >= 0:
             return counters                          # the common case, in a few C loops
     fail = _failer("traversals", plugin)
     if not isinstance(counters, Counters):
         fail(f"intersect() must return raysort.stats.Counters, got {type(counters).__name__}")
     for name in _COUNTER_FIELDS:
-        value = getattr(counters, name)
-        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 0:
-            fail(f"Counters.{name} must be a whole number >= 0, got {value!r}")
+        _whole_number(getattr(counters, name), f"Counters.{name}", fail)
     if not isinstance(counters.available, bool):
         fail(f"Counters.available must be True or False, got {counters.available!r}")
+    levels = counters.stream_level_rays
+    if not isinstance(levels, tuple):
+        fail(f"Counters.stream_level_rays must be a tuple, got {type(levels).__name__}")
+    for level, value in enumerate(levels):
+        _whole_number(value, f"Counters.stream_level_rays[{level}]", fail)
     return counters
+
+
+def _whole_number(value, label, fail):
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 0:
+        fail(f"{label} must be a whole number >= 0, got {value!r}")
 
 
 def check_generated(plugin, rays, n, *, with_rays=True):

@@ -29,10 +29,8 @@ class Counters:
     ``stream_level_rays`` splits ``stream_rays`` by the depth in the tree of
     the box each stream was popped at: entry ``d`` is the rays that entered
     boxes of level ``d`` together (0: the root; as long as the deepest level
-    reached, ``()`` for the others).  Tuples of different lengths add up
-    entry by entry.  It is an attribute, not a dataclass field (the fields
-    are the whole-number counters the traversal contract checks); set it
-    after construction.
+    reached, ``()`` for the others); tuples of different lengths add up
+    entry by entry.
     """
 
     rays: int = 0
@@ -44,13 +42,13 @@ class Counters:
     stream_tasks: int = 0
     stream_rays: int = 0
     available: bool = True
-    stream_level_rays = ()      # not annotated: an attribute, see the docstring
+    stream_level_rays: tuple = ()
 
     def __add__(self, other):
         if not isinstance(other, Counters):
             return NotImplemented
-        out = Counters(**{f.name: getattr(self, f.name) + getattr(other, f.name)
-                          for f in fields(self) if f.name != "available"})
+        out = Counters(**{name: getattr(self, name) + getattr(other, name)
+                          for name in WHOLE_NUMBERS})
         out.stream_level_rays = _add_levels(self.stream_level_rays, other.stream_level_rays)
         out.available = self.available and other.available
         return out
@@ -66,6 +64,11 @@ class Counters:
         out = {f.name: getattr(self, f.name) for f in fields(self)}
         out["stream_level_rays"] = list(self.stream_level_rays)
         return out
+
+
+# the counters that are one whole number each (the rest: ``available``, ``stream_level_rays``)
+WHOLE_NUMBERS = tuple(f.name for f in fields(Counters)
+                      if f.name not in ("available", "stream_level_rays"))
 
 
 def _add_levels(a, b):

@@ -457,6 +457,9 @@ def test_a_hit_on_an_invalid_ray_is_broken():
     (raysort.Counters(tri4=1.5), "tri4"),
     (raysort.Counters(rays=True), "rays"),
     (raysort.Counters(available=1), "available"),
+    (raysort.Counters(stream_level_rays=[4, 2]), "stream_level_rays must be a tuple"),
+    (raysort.Counters(stream_level_rays=(4, -2)), r"stream_level_rays\[1\] must be a whole"),
+    (raysort.Counters(stream_level_rays=(4, 2.0)), r"stream_level_rays\[1\]"),
 ])
 def test_broken_counters(counters, match):
     with pytest.raises(PluginContractError, match=match):

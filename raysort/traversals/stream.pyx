@@ -101,10 +101,9 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
         level_rays = tuple([w.level_rays[k] for k in range(levels)])
     finally:
         rs_stream_free(&w)
-    out = Counters(rays=active, box1=c.box1, box4=c.box4, tri1=c.tri1, tri4=c.tri4,
-                   stream_tasks=c.stream_tasks, stream_rays=c.stream_rays)
-    out.stream_level_rays = level_rays
-    return out
+    return Counters(rays=active, box1=c.box1, box4=c.box4, tri1=c.tri1, tri4=c.tri4,
+                    stream_tasks=c.stream_tasks, stream_rays=c.stream_rays,
+                    stream_level_rays=level_rays)
 
 
 class StreamTraversal(Traversal):
