@@ -179,37 +179,47 @@ cdef int index_lanes_kernel(const int32_t *prim, const int32_t *index, const int
                             Py_ssize_t *where) noexcept nogil:
     """Sub-packet k still starts and ends where the gather put it (from ``offsets``: its
     rays padded to a multiple of 4 lanes), each of its lanes holds
-    ``order[offsets[k] + j]``; other lanes hold no ray (index and prim -1)."""
-    cdef Py_ssize_t k, j, s, c, end = 0, lane, next_start = 0
-    cdef const int32_t *lanes
-    cdef const int32_t *rays
-    cdef int bad
-    for k in range(n_sub + 1):
-        if k < n_sub:
-            s, c = next_start, offsets[k + 1] - offsets[k]
-            next_start = s + ((c + 3) & ~3)
-            if starts[k] != s or counts[k] != c or next_start > capacity:
-                where[0] = k
-                return BAD_LAYOUT
-        else:
-            s, c = capacity, 0
-        bad = 0
-        for lane in range(end, s):
-            bad |= (index[lane] != -1) | (prim[lane] != -1)
-        if bad:
-            for lane in range(end, s):
-                if index[lane] != -1 or prim[lane] != -1:
-                    where[0] = lane
-                    return BAD_PADDING
-        lanes = index + s
-        rays = order + (offsets[k] if k < n_sub else 0)
-        if c and memcmp(lanes, rays, c * sizeof(int32_t)):    # short runs: libc's compare
+    ``order[offsets[k] + j]``; other lanes hold no ray (index and prim -1).
+
+    The rays' lanes are compared sub-packet by sub-packet; the padding in one pass over
+    all lanes: the rays' lanes hold n rays (order's values are rays, checked by the
+    gather), so the padding is untouched exactly when n lanes in all hold a ray and
+    every lane that holds none has prim -1."""
+    cdef Py_ssize_t k, j, s, c, lane, next_start = 0, n = offsets[n_sub], holding = 0
+    cdef int bad = 0, empty
+    for k in range(n_sub):
+        s, c = next_start, offsets[k + 1] - offsets[k]
+        next_start = s + ((c + 3) & ~3)
+        if starts[k] != s or counts[k] != c or next_start > capacity:
+            where[0] = k
+            return BAD_LAYOUT
+        if memcmp(index + s, order + offsets[k], c * sizeof(int32_t)):
             for j in range(c):
-                if lanes[j] != rays[j]:
+                if index[s + j] != order[offsets[k] + j]:
                     where[0] = s + j
                     return BAD_LANE_INDEX
-        end = s + c
+    for lane in range(capacity):
+        empty = index[lane] == -1
+        holding += not empty
+        bad |= empty & (prim[lane] != -1)
+    if bad or holding != n:
+        return padding_fault(prim, index, starts, counts, n_sub, capacity, where)
     return 0
+
+
+cdef int padding_fault(const int32_t *prim, const int32_t *index, const int32_t *starts,
+                       const int32_t *counts, Py_ssize_t n_sub, Py_ssize_t capacity,
+                       Py_ssize_t *where) noexcept nogil:
+    """The first padding lane written into (one is known to be)."""
+    cdef Py_ssize_t k, lane, s, end = 0
+    for k in range(n_sub + 1):
+        s = starts[k] if k < n_sub else capacity
+        for lane in range(end, s):
+            if index[lane] != -1 or prim[lane] != -1:
+                where[0] = lane
+                return BAD_PADDING
+        end = s + (counts[k] if k < n_sub else 0)
+    return BAD_PADDING      # not reached
 
 
 def hits(const float[:, ::1] rows not None, const float[::1] t0 not None,

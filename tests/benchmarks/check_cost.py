@@ -17,6 +17,12 @@ gather and scatter call of one checked frame with and without its checks, interl
 call by call, and reports their difference as a share of that frame's CPU (warm caches:
 the checks read what the gather and scatter read anyway, so the extra is mostly
 arithmetic).  Run it on an otherwise idle machine and read the spreads.
+
+For a count of instructions instead (stable on a noisy machine), render under
+callgrind with the checks on or off, once and twice; the frame is the difference:
+
+    OPENBLAS_NUM_THREADS=1 valgrind --tool=callgrind \
+        python tests/benchmarks/check_cost.py sibenik --size 128 --only on --renders 1
 """
 import argparse
 import statistics
@@ -85,8 +91,17 @@ def main():
     parser.add_argument("--size", type=int, default=256, help="image edge in pixels (256)")
     parser.add_argument("--spp", type=int, default=16, help="samples per pixel (16)")
     parser.add_argument("--rounds", type=int, default=7, help="timed rounds (7)")
+    parser.add_argument("--only", choices=("on", "off"),
+                        help="just render with the checks on or off (for callgrind)")
+    parser.add_argument("--renders", type=int, default=1, help="frames to render with --only")
     args = parser.parse_args()
     scene = load_scene(args.scene)
+    if args.only:
+        pipe = Pipeline(scene, threads=1, check_plugins=args.only == "on")
+        pipe.render(32, 32, 1)                  # the lazy wide BVHs, as in a timed run
+        for _ in range(args.renders):
+            pipe.render(args.size, args.size, args.spp)
+        return
     pipes = {"on": Pipeline(scene, threads=1, check_plugins=True),
              "off": Pipeline(scene, threads=1, check_plugins=False)}
     seconds = {name: [] for name in pipes}
