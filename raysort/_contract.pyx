@@ -145,21 +145,35 @@ def sort_result(const int32_t[::1] order, const int32_t[::1] offsets,
 # a traversal's hits
 # ---------------------------------------------------------------------------
 
-cdef int lanes_kernel(const int32_t *prim, const float *tmin, const float *t, const float *t0,
-                      const float *u, const float *v, Py_ssize_t capacity, uint32_t n_prim,
-                      bint any_hit, Py_ssize_t *where) noexcept nogil:
-    cdef Py_ssize_t a = 0, b, lane
-    cdef int bad
+cdef int lanes_kernel(const int32_t *prim, const int32_t *index, const float *tmin,
+                      const float *t, const float *t0, const float *u, const float *v,
+                      Py_ssize_t capacity, uint32_t n_prim, bint any_hit, Py_ssize_t *held,
+                      Py_ssize_t *where) noexcept nogil:
+    """Every lane's hit, in one pass that also counts the lanes holding a ray (``held``)
+    and returns BAD_PADDING when a lane holding none has a prim (which lane:
+    :func:`padding_fault`)."""
+    cdef Py_ssize_t a = 0, b, lane, holding = 0
+    cdef int bad, pad, empty
+    cdef int32_t p
     while a < capacity:
         b = block_end(a, capacity)
-        bad = 0
+        bad = pad = 0
         if any_hit:             # a hit is any valid prim; t is the traversal's business
             for lane in range(a, b):
-                bad |= any_hit_bad(prim[lane], n_prim)
+                p = prim[lane]
+                empty = index[lane] == -1
+                holding += not empty
+                pad |= empty & (p != -1)
+                bad |= any_hit_bad(p, n_prim)
         else:
             for lane in range(a, b):
-                bad |= closest_bad(prim[lane], tmin[lane], t[lane], t0[lane], u[lane],
-                                   v[lane], n_prim)
+                p = prim[lane]
+                empty = index[lane] == -1
+                holding += not empty
+                pad |= empty & (p != -1)
+                bad |= closest_bad(p, tmin[lane], t[lane], t0[lane], u[lane], v[lane], n_prim)
+        if pad:
+            return BAD_PADDING
         if bad:
             for lane in range(a, b):
                 where[0] = lane
@@ -170,6 +184,7 @@ cdef int lanes_kernel(const int32_t *prim, const float *tmin, const float *t, co
                     continue
                 return BAD_UV if tmin[lane] < t[lane] < t0[lane] else BAD_T
         a = b
+    held[0] = holding
     return 0
 
 
@@ -178,15 +193,13 @@ cdef int index_lanes_kernel(const int32_t *prim, const int32_t *index, const int
                             const int32_t *offsets, Py_ssize_t capacity,
                             Py_ssize_t *where) noexcept nogil:
     """Sub-packet k still starts and ends where the gather put it (from ``offsets``: its
-    rays padded to a multiple of 4 lanes), each of its lanes holds
-    ``order[offsets[k] + j]``; other lanes hold no ray (index and prim -1).
-
-    The rays' lanes are compared sub-packet by sub-packet; the padding in one pass over
-    all lanes: the rays' lanes hold n rays (order's values are rays, checked by the
-    gather), so the padding is untouched exactly when n lanes in all hold a ray and
-    every lane that holds none has prim -1."""
-    cdef Py_ssize_t k, j, s, c, lane, next_start = 0, n = offsets[n_sub], holding = 0
-    cdef int bad = 0, empty
+    rays padded to a multiple of 4 lanes) and each of its lanes holds
+    ``order[offsets[k] + j]`` (compared sub-packet by sub-packet).  That the other lanes
+    hold no ray is left to :func:`lanes_kernel`'s pass over all lanes: as the rays'
+    lanes hold n rays (order's values are rays, checked by the gather), the padding is
+    untouched exactly when n lanes in all hold a ray and every lane holding none has
+    prim -1."""
+    cdef Py_ssize_t k, j, s, c, next_start = 0
     for k in range(n_sub):
         s, c = next_start, offsets[k + 1] - offsets[k]
         next_start = s + ((c + 3) & ~3)
@@ -198,12 +211,6 @@ cdef int index_lanes_kernel(const int32_t *prim, const int32_t *index, const int
                 if index[s + j] != order[offsets[k] + j]:
                     where[0] = s + j
                     return BAD_LANE_INDEX
-    for lane in range(capacity):
-        empty = index[lane] == -1
-        holding += not empty
-        bad |= empty & (prim[lane] != -1)
-    if bad or holding != n:
-        return padding_fault(prim, index, starts, counts, n_sub, capacity, where)
     return 0
 
 
@@ -233,7 +240,7 @@ def hits(const float[:, ::1] rows not None, const float[::1] t0 not None,
     put there (``order[offsets[k]:offsets[k + 1]]`` in sub-packet k; other lanes index and
     prim -1), prim is -1 or a triangle index below ``n_prim``, and a closest hit has
     ``tmin < t < t0`` and finite u, v.  An any-hit query marks a hit by any valid prim."""
-    cdef Py_ssize_t where = 0, capacity = rows.shape[1]
+    cdef Py_ssize_t where = 0, capacity = rows.shape[1], held = 0
     cdef int code
     if (rows.shape[0] != RS_PACKET_ROWS or prim.shape[0] != capacity
             or u.shape[0] != capacity or v.shape[0] != capacity
@@ -247,9 +254,13 @@ def hits(const float[:, ::1] rows not None, const float[::1] t0 not None,
                                   &order[0] if order.shape[0] else NULL, &offsets[0], capacity,
                                   &where)
         if not code:
-            code = lanes_kernel(&prim[0], &rows[RS_PACKET_TMIN, 0], &rows[RS_PACKET_T, 0],
-                                &t0[0], &u[0], &v[0], capacity, <uint32_t> n_prim, any_hit,
-                                &where)
+            code = lanes_kernel(&prim[0], &index[0], &rows[RS_PACKET_TMIN, 0],
+                                &rows[RS_PACKET_T, 0], &t0[0], &u[0], &v[0], capacity,
+                                <uint32_t> n_prim, any_hit, &held, &where)
+        if code == BAD_PADDING or (not code and held != offsets[starts.shape[0]]):
+            code = padding_fault(&prim[0], &index[0], &starts[0] if starts.shape[0] else NULL,
+                                 &counts[0] if counts.shape[0] else NULL, starts.shape[0],
+                                 capacity, &where)
     return code, where
 
 
@@ -399,15 +410,21 @@ cdef inline int row_ray_bad(const float *const *r, Py_ssize_t i) noexcept nogil:
                    r[RS_RAY_DY][i], r[RS_RAY_DZ][i], r[RS_RAY_TMIN][i], r[RS_RAY_TMAX][i])
 
 
-cdef inline int parents_bad(const int32_t *parent, Py_ssize_t a, Py_ssize_t b,
-                            uint32_t n) noexcept nogil:
-    """parent[a:b] in [0, n) and ascending (from parent[a - 1] when a > 0)."""
+cdef inline int parents_weights_bad(const int32_t *parent, const uint32_t *w0,
+                                   const uint32_t *w1, const uint32_t *w2, Py_ssize_t a,
+                                   Py_ssize_t b, uint32_t n) noexcept nogil:
+    """parent[a:b] in [0, n) and ascending (from parent[a - 1] when a > 0), and the
+    float32 weights (as bits) w0, w1, w2 [a:b] finite, in one loop."""
     cdef Py_ssize_t i
     cdef int bad = 0
+    if a == 0 and b > 0:
+        bad = (<uint32_t> parent[0] >= n) | nonfinite32(w0, 0, 1) | nonfinite32(w1, 0, 1) \
+            | nonfinite32(w2, 0, 1)
+        a = 1
     for i in range(a, b):
-        bad |= <uint32_t> parent[i] >= n
-    for i in range(a if a else 1, b):
-        bad |= parent[i] < parent[i - 1]
+        bad |= ((<uint32_t> parent[i] >= n) | (parent[i] < parent[i - 1])
+                | ((w0[i] & 0x7F800000u) == 0x7F800000u) | ((w1[i] & 0x7F800000u) == 0x7F800000u)
+                | ((w2[i] & 0x7F800000u) == 0x7F800000u))
     return bad
 
 
@@ -429,9 +446,8 @@ cdef int paths_kernel(const float *const *r, const int32_t *parent, const float 
     cdef int bad, c
     while a < m:
         b = block_end(a, m)
-        bad = parents_bad(parent, a, b, n)
-        for c in range(3):
-            bad |= nonfinite32(<const uint32_t *> w[c], a, b)
+        bad = parents_weights_bad(parent, <const uint32_t *> w[0], <const uint32_t *> w[1],
+                                  <const uint32_t *> w[2], a, b, n)
         if slot != NULL:
             bad |= slots_bad(slot, a, b, slots)
         if r != NULL:

@@ -45,6 +45,7 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
     the ray contract (active, yet tmin < 0 or not finite; stored inactive), or -1.
     """
     cdef Py_ssize_t n_packets = starts.shape[0], k, k_big = 0, j, count, base, s, ahead
+    cdef Py_ssize_t checked = 0     # sub-packets before it: order checked
     cdef int32_t n = order.shape[0]
     cdef const float *src_rows[RS_RAY_ROWS]
     cdef float *dst_rows[RS_PACKET_ROWS]
@@ -64,11 +65,19 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
         for k in range(n_packets):
             base = offsets[k]
             count = offsets[k + 1] - base
-            if check_order and (
-                    packet_bounds(order[base], &packets[0], packets.shape[0] - 1, n, &k_big,
-                                  &lo, &hi) or range_bad(&order[0], base, base + count, lo, hi)):
-                order_bad = 1
-                break
+            if check_order and k >= checked:
+                # the run of sub-packets from k whose first rays share a large packet, then
+                # every ray of the run in it: one long loop rather than one per sub-packet
+                if packet_bounds(order[base], &packets[0], packets.shape[0] - 1, n, &k_big,
+                                 &lo, &hi):
+                    order_bad = 1
+                    break
+                checked = k + 1
+                while checked < n_packets and lo <= order[offsets[checked]] < hi:
+                    checked += 1
+                if range_bad(&order[0], base, offsets[checked], lo, hi):
+                    order_bad = 1
+                    break
             for j in range(0, count, 4):
                 # the rows of rays further on, which the order makes random accesses (a
                 # prefetch of a ray not checked yet reads nothing)

@@ -301,14 +301,19 @@ def _move_first_sub_packet(self, bvh, packets, any_hit=False):
     return Counters()
 
 
+def _one_sub_packet(self, rays, packets, bounds):
+    return np.arange(len(rays), dtype=np.int32), np.array([0, len(rays)], np.int32)
+
+
 def _repeat_first_ray(self, rays, packets, bounds):
     order = np.arange(len(rays), dtype=np.int32)
     order[1:2] = 0
-    return order, np.array([0, len(rays)], np.int32)
+    return order, np.asarray(packets, np.int32)         # one sub-packet per large packet
 
 
 @pytest.mark.parametrize("kind, method, broken, match", [
     ("sorters", "sort", _repeat_first_ray, "permutation"),
+    ("sorters", "sort", _one_sub_packet, "mixes rays of different large packets"),
     ("traversals", "intersect", _write_prim(50_000_000), "prim = 50000000"),
     ("traversals", "intersect", _write_prim(-7), "prim = -7"),
     ("traversals", "intersect", _move_first_sub_packet, "changed packets.starts"),
@@ -320,7 +325,7 @@ def test_fused_checks_catch_builtin_plugins(monkeypatch, kind, method, broken, m
     plugin = getattr(pipe, kind[:-1])
     monkeypatch.setattr(type(plugin), method, broken)
     with pytest.raises(PluginContractError, match=match) as info:
-        pipe.render(8, 8, 1)
+        pipe.render(8, 8, 2)            # two sample passes: two large packets per batch
     assert (info.value.kind, info.value.name) == (kind, plugin.name)
 
 

@@ -1,7 +1,7 @@
 """The bounds-checked build (``RAYSORT_DEBUG_CYTHON=1 pip install .``) checks bounds.
 
-A kernel given an index past its output array raises IndexError in that build
-(the normal build would write past the array, so the probe runs in a child
+A kernel given an input array shorter than the others raises IndexError in that
+build (the normal build would read past the array, so the probe runs in a child
 process).  The test runs when ``RAYSORT_DEBUG_CYTHON`` says the installed build
 is the checked one, as in the second half of ``.ci/run``.
 """
@@ -16,8 +16,8 @@ DEBUG = os.environ.get("RAYSORT_DEBUG_CYTHON", "").strip().lower() in ("1", "yes
 PROBE = """
 import numpy as np
 from raysort import _gather
-prim = np.zeros(4, np.int32)
-index = np.array([0, 1, 2, 4], np.int32)      # lane 3 points one past `out`
+prim = np.zeros(2, np.int32)                  # lanes 2 and 3 have no prim
+index = np.array([0, 1, 2, 3], np.int32)
 out = np.zeros(4, np.uint8)
 try:
     _gather.scatter_occluded(prim, index, out)
