@@ -1,6 +1,8 @@
-"""The contract rules one element at a time, shared by the stand-alone checks
-(:mod:`raysort._contract`) and the checks fused into the gather and the scatter
-(:mod:`raysort._gather`), so both apply the same rules.
+"""The contract rules one element (or one run) at a time, for the check kernels
+(:mod:`raysort._contract`: the SDK's checks and the pipeline's pass over a
+traversal's lanes) and the sort-result checks inside the gather
+(:mod:`raysort._gather`: :func:`offsets_bad`, :func:`packet_bounds`,
+:func:`range_bad`), so every path applies the same rules.
 
 Each returns non-zero when the element breaks its contract, written without
 branches so that loops over a block vectorise.  A float ``x`` is finite exactly
