@@ -307,13 +307,15 @@ def gather_checked(rays, order, offsets, packets, keep_tmax=False, check_order=T
     contract on the way, for the pipeline.
 
     ``order`` and ``offsets`` are int32 arrays with ``len(order) == len(rays)``;
-    ``packets`` valid boundaries; sub-packets hold 1..``max_packet`` rays.  Returns ``(Packets, tmax, bad_ray)``:
-    ``(None, None, -1)`` if the offsets break their contract or a sub-packet holds a
-    ray beyond its large packet (:func:`raysort.contract.check_sort` says how; a ray
-    that comes twice is found by :func:`scatter_checked`); ``tmax`` (with ``keep_tmax``;
-    otherwise None) each lane's t as gathered, which :func:`scatter_checked` needs
-    for closest hits; ``bad_ray`` a ray
-    that is active yet not finite or with tmin < 0 (traced as invalid), or -1.
+    ``packets`` valid boundaries; sub-packets hold 1..``max_packet`` rays.
+
+    Returns ``(Packets, tmax, bad_ray)``: ``(None, None, -1)`` if the offsets break
+    their contract or a sub-packet holds a ray beyond its large packet
+    (:func:`raysort.contract.check_sort` says how; a ray that comes twice is found by
+    :func:`scatter_checked`); ``tmax`` (with ``keep_tmax``; otherwise None) each
+    lane's t as gathered, which :func:`scatter_checked` needs for closest hits;
+    ``bad_ray`` a ray that is active yet not finite or with tmin < 0 (traced as
+    invalid), or -1.
     """
     kernels = isa.module("_gather")
     if len(order) != len(rays) or not kernels.offsets_valid(offsets, len(rays), max_packet):
