@@ -1,4 +1,4 @@
-"""Binned-SAH BVH construction and refitting (nogil).
+"""Binned-SAH BVH construction, optionally with spatial splits, and refitting (nogil).
 
 The tree is binary and stored depth first: an inner node's left child is the
 next node and its right child is ``node.offset``; a leaf holds the triangles
@@ -7,10 +7,25 @@ input index.  Split costs follow DynBVH's SAH with C_isec = 1 and C_trav =
 ``trav_cost`` (1 in DynBVH): a node becomes a leaf when it holds at most
 ``max_leaf`` triangles and no binned split is cheaper than intersecting them
 all.
+
+With a reference budget (``spatial_budget`` > 0) the builder is an SBVH (Stich,
+Friedrich and Dietrich, "Spatial splits in bounding volume hierarchies", HPG
+2009): it works on references (a triangle and a box holding the part of it the
+node owns), and besides the object split over the reference centroids it bins
+the node's box itself and chops every reference into the bins it spans (the
+triangle's edges cut by each bin plane, the parts' boxes intersected with the
+reference's box).  A spatial split is tried only where the object split's
+children overlap by more than ``alpha`` times the root's area, is taken when
+its SAH cost is lower, and each reference cut by its plane may still go to one
+side whole when that is cheaper (reference unsplitting).  A triangle may then
+sit in several leaves; the references never outnumber ``(1 + spatial_budget)``
+times the triangles, the room being shared out between the children in
+proportion to their references.
 """
 from libc.stdlib cimport malloc, free, qsort
-from libc.stdint cimport int32_t
-from libc.math cimport INFINITY
+from libc.string cimport memmove, memcpy
+from libc.stdint cimport int32_t, int64_t, uint32_t
+from libc.math cimport INFINITY, fabs
 from raysort._types cimport (rs_node, rs_node4, rs_node8, rs_tri, rs_tri8, rs_minf, rs_maxf,
                              RS_DEGENERATE_SIN2)
 
@@ -18,6 +33,7 @@ import numpy as np
 
 cdef enum:
     MAX_BINS = 64
+    STACK_SLACK = 64    # tasks beyond one per reference on the build stack
 
 
 cdef struct Box:
@@ -25,11 +41,28 @@ cdef struct Box:
     float hi[3]
 
 
+cdef struct Ref:
+    Box box             # holds the part of triangle `prim` that the node owns
+    int32_t prim
+
+
 cdef struct Task:
-    int start
+    int start       # references [start, end) of the reference array ...
     int end
+    int room        # ... with room for them to grow into up to `room`
     int parent      # node whose `offset` must point here (right children), or -1
     int depth
+
+
+cdef struct Split:
+    int axis
+    int bin         # the split lies after bin `bin`
+    float cost
+    float pos       # spatial splits: the plane
+    Box left        # the children's boxes and reference counts as binned
+    Box right
+    int n_left
+    int n_right
 
 
 cdef inline void box_empty(Box *b) noexcept nogil:
@@ -44,6 +77,17 @@ cdef inline void box_grow(Box *b, const float *lo, const float *hi) noexcept nog
         b.hi[a] = rs_maxf(hi[a], b.hi[a])
 
 
+cdef inline void box_clip(Box *b, const float *lo, const float *hi) noexcept nogil:
+    """Intersect ``b`` with the box (lo, hi)."""
+    for a in range(3):
+        b.lo[a] = rs_maxf(lo[a], b.lo[a])
+        b.hi[a] = rs_minf(hi[a], b.hi[a])
+
+
+cdef inline bint box_is_empty(const Box *b) noexcept nogil:
+    return not (b.lo[0] <= b.hi[0] and b.lo[1] <= b.hi[1] and b.lo[2] <= b.hi[2])
+
+
 cdef inline float box_half_area(const Box *b) noexcept nogil:
     cdef float dx = b.hi[0] - b.lo[0], dy = b.hi[1] - b.lo[1], dz = b.hi[2] - b.lo[2]
     if dx < 0:
@@ -51,9 +95,19 @@ cdef inline float box_half_area(const Box *b) noexcept nogil:
     return dx * dy + dy * dz + dz * dx
 
 
-cdef int cmp_int32(const void *a, const void *b) noexcept nogil:
-    cdef int32_t x = (<const int32_t *> a)[0], y = (<const int32_t *> b)[0]
+cdef inline float overlap_half_area(const Box *x, const Box *y) noexcept nogil:
+    cdef Box o = x[0]
+    box_clip(&o, y.lo, y.hi)
+    return 0 if box_is_empty(&o) else box_half_area(&o)
+
+
+cdef int cmp_ref_prim(const void *a, const void *b) noexcept nogil:
+    cdef int32_t x = (<const Ref *> a).prim, y = (<const Ref *> b).prim
     return (x > y) - (x < y)
+
+
+cdef inline float centroid(const Ref *r, int a) noexcept nogil:
+    return 0.5 * r.box.lo[a] + 0.5 * r.box.hi[a]
 
 
 cdef inline int bin_of(float c, float cmin, float scale, int bins) noexcept nogil:
@@ -61,20 +115,18 @@ cdef inline int bin_of(float c, float cmin, float scale, int bins) noexcept nogi
     return 0 if k < 0 else (bins - 1 if k >= bins else k)
 
 
-cdef int find_split(const float *cent, const float *tlo, const float *thi,
-                    const int32_t *order, int start, int end, const Box *cbox,
-                    const Box *nbox, int bins, float trav_cost, int *axis_out, int *bin_out,
-                    float *cost_out) noexcept nogil:
-    """Best binned SAH split over all three axes; returns 0 when none exists."""
+cdef int find_split(const Ref *refs, int start, int end, const Box *cbox, const Box *nbox,
+                    int bins, float trav_cost, Split *best) noexcept nogil:
+    """Best binned SAH object split over all three axes; returns 0 when none exists."""
     cdef Box bin_box[MAX_BINS]
     cdef int bin_count[MAX_BINS]
-    cdef float right_area[MAX_BINS]
+    cdef Box right_box[MAX_BINS]
     cdef int right_count[MAX_BINS]
     cdef Box acc
-    cdef int a, i, k, p, n_left, found = 0
+    cdef int a, i, k, n_left, found = 0
     cdef float extent, scale, cost
     cdef float parent_area = box_half_area(nbox)
-    cost_out[0] = INFINITY
+    best.cost = INFINITY
     for a in range(3):
         extent = cbox.hi[a] - cbox.lo[a]
         if not (extent > 0):
@@ -84,17 +136,16 @@ cdef int find_split(const float *cent, const float *tlo, const float *thi,
             box_empty(&bin_box[k])
             bin_count[k] = 0
         for i in range(start, end):
-            p = order[i]
-            k = bin_of(cent[3 * p + a], cbox.lo[a], scale, bins)
+            k = bin_of(centroid(&refs[i], a), cbox.lo[a], scale, bins)
             bin_count[k] += 1
-            box_grow(&bin_box[k], &tlo[3 * p], &thi[3 * p])
-        # sweep from the right: area and count of bins k .. bins-1
+            box_grow(&bin_box[k], refs[i].box.lo, refs[i].box.hi)
+        # sweep from the right: box and count of bins k .. bins-1
         box_empty(&acc)
         n_left = 0
         for k in range(bins - 1, 0, -1):
             box_grow(&acc, bin_box[k].lo, bin_box[k].hi)
             n_left += bin_count[k]
-            right_area[k] = box_half_area(&acc)
+            right_box[k] = acc
             right_count[k] = n_left
         # sweep from the left, evaluating the split after bin k
         box_empty(&acc)
@@ -105,45 +156,342 @@ cdef int find_split(const float *cent, const float *tlo, const float *thi,
             if n_left == 0 or right_count[k + 1] == 0:
                 continue
             cost = trav_cost + (n_left * box_half_area(&acc)
-                          + right_count[k + 1] * right_area[k + 1]) / parent_area
-            if cost < cost_out[0]:
-                cost_out[0] = cost
-                axis_out[0] = a
-                bin_out[0] = k
+                          + right_count[k + 1] * box_half_area(&right_box[k + 1])) / parent_area
+            if cost < best.cost:
+                best[0] = Split(a, k, cost, 0, acc, right_box[k + 1], n_left, right_count[k + 1])
                 found = 1
     return found
 
 
+cdef union FloatBits:
+    float f
+    uint32_t u
+
+
+cdef inline float next_down(float f) noexcept nogil:
+    """The float32 just below finite ``f``."""
+    cdef FloatBits b
+    b.f = f
+    if f > 0:
+        b.u -= 1
+    elif f < 0:
+        b.u += 1
+    else:
+        b.u = 0x80000001        # -0 and +0: the smallest negative subnormal
+    return b.f
+
+
+cdef inline float lower_float(double x) noexcept nogil:
+    """The largest float32 <= ``x``."""
+    cdef float f = <float> x
+    return next_down(f) if f > x else f
+
+
+cdef inline float upper_float(double x) noexcept nogil:
+    """The smallest float32 >= ``x``."""
+    return -lower_float(-x)
+
+
+cdef enum:
+    # |error| of a plane crossing computed in double is below 2^-49 (|x0| + |x1|) for the
+    # edge's end coordinates x0, x1 (a few roundings of 2^-53, |t| <= 1); the crossing's
+    # box is widened by 2^-46 (|x0| + |x1|) before it is rounded outward to float32
+    CROSSING_ERROR_EXPONENT = -46
+
+
+cdef void split_ref(const float *tri, const Ref *ref, int axis, float pos, Ref *left,
+                    Ref *right) noexcept nogil:
+    """Cut reference ``ref`` of triangle ``tri`` (its three vertices, 9 floats) by the
+    plane ``x[axis] = pos``: boxes of the triangle's parts on either side (its vertices
+    there and its edges' crossings of the plane, computed in double and rounded outward
+    to float32), each intersected with the reference's box.  A part the box does not
+    meet comes back empty (lo > hi)."""
+    cdef Box lb, rb
+    cdef int e, c
+    cdef const float *p0
+    cdef const float *p1
+    cdef float x0, x1
+    cdef float qlo[3]
+    cdef float qhi[3]
+    cdef double t, q, err
+    cdef double err_scale = 2.0 ** CROSSING_ERROR_EXPONENT
+    box_empty(&lb)
+    box_empty(&rb)
+    for e in range(3):
+        p0 = &tri[3 * e]
+        p1 = &tri[3 * ((e + 1) % 3)]
+        x0 = p0[axis]
+        x1 = p1[axis]
+        if x0 <= pos:
+            box_grow(&lb, p0, p0)
+        if x0 >= pos:
+            box_grow(&rb, p0, p0)
+        if (x0 < pos and x1 > pos) or (x0 > pos and x1 < pos):
+            t = (<double> pos - x0) / (<double> x1 - x0)
+            for c in range(3):
+                if c == axis:
+                    qlo[c] = qhi[c] = pos
+                else:
+                    q = p0[c] + t * (<double> p1[c] - p0[c])
+                    err = err_scale * (fabs(p0[c]) + fabs(p1[c]))
+                    qlo[c] = lower_float(q - err)
+                    qhi[c] = upper_float(q + err)
+            box_grow(&lb, qlo, qhi)
+            box_grow(&rb, qlo, qhi)
+    box_clip(&lb, ref.box.lo, ref.box.hi)
+    box_clip(&rb, ref.box.lo, ref.box.hi)
+    lb.hi[axis] = rs_minf(lb.hi[axis], pos)
+    rb.lo[axis] = rs_maxf(rb.lo[axis], pos)
+    left[0] = Ref(lb, ref.prim)
+    right[0] = Ref(rb, ref.prim)
+
+
+cdef inline int plane_bin(float x, const float *pos, int bins, float scale,
+                          bint upper) noexcept nogil:
+    """The spatial bin of coordinate ``x``: k with pos[k] <= x < pos[k + 1] (a box's lower
+    side), or pos[k] < x <= pos[k + 1] (``upper``, a box's upper side), within 0..bins-1."""
+    cdef int k = bin_of(x, pos[0], scale, bins)
+    if upper:
+        while k > 0 and x <= pos[k]:
+            k -= 1
+        while k < bins - 1 and x > pos[k + 1]:
+            k += 1
+    else:
+        while k > 0 and x < pos[k]:
+            k -= 1
+        while k < bins - 1 and x >= pos[k + 1]:
+            k += 1
+    return k
+
+
+cdef inline void ref_bins(const Ref *r, int axis, const float *pos, int bins, float scale,
+                          int *first, int *last) noexcept nogil:
+    """The spatial bins ``first .. last`` that reference ``r`` spans on ``axis``."""
+    first[0] = plane_bin(r.box.lo[axis], pos, bins, scale, False)
+    last[0] = plane_bin(r.box.hi[axis], pos, bins, scale, True)
+    if last[0] < first[0]:
+        last[0] = first[0]
+
+
+cdef void bin_planes(const Box *nbox, int axis, int bins, float *pos) noexcept nogil:
+    """The ``bins + 1`` planes (non-decreasing) that cut the node's box into equal bins."""
+    cdef float lo = nbox.lo[axis], hi = nbox.hi[axis], step = (hi - lo) / bins
+    cdef int k
+    pos[0] = lo
+    for k in range(1, bins):
+        pos[k] = rs_minf(lo + k * step, hi)
+    pos[bins] = hi
+
+
+cdef void chop_into_bins(const float *tri, const Box *box, int axis, const float *pos,
+                         int first, int last, Box *bin_box) noexcept nogil:
+    """Grow bins ``first .. last`` by the boxes of the parts of triangle ``tri`` (within
+    ``box``) that lie in them.  For the SAH estimate only: the edges' crossings of the
+    bin planes are computed in float32 and not rounded outward (split_ref makes the
+    references' conservative boxes)."""
+    cdef Box piece, crossing
+    cdef int j, e, c
+    cdef float lo_plane, hi_plane, x0, x1, t
+    cdef float q[3]
+    cdef const float *p0
+    cdef const float *p1
+    box_empty(&crossing)
+    for j in range(first, last + 1):
+        piece = crossing                # the crossings of the plane below (none at first)
+        lo_plane = pos[j] if j > first else -INFINITY
+        hi_plane = pos[j + 1] if j < last else INFINITY
+        for e in range(3):
+            if lo_plane <= tri[3 * e + axis] <= hi_plane:
+                box_grow(&piece, &tri[3 * e], &tri[3 * e])
+        box_empty(&crossing)
+        if j < last:
+            for e in range(3):
+                p0 = &tri[3 * e]
+                p1 = &tri[3 * ((e + 1) % 3)]
+                x0 = p0[axis]
+                x1 = p1[axis]
+                if (x0 < hi_plane and x1 > hi_plane) or (x0 > hi_plane and x1 < hi_plane):
+                    t = (hi_plane - x0) / (x1 - x0)
+                    for c in range(3):
+                        q[c] = p0[c] + t * (p1[c] - p0[c])
+                    q[axis] = hi_plane
+                    box_grow(&crossing, q, q)
+            box_grow(&piece, crossing.lo, crossing.hi)
+        box_clip(&piece, box.lo, box.hi)
+        piece.lo[axis] = rs_maxf(piece.lo[axis], pos[j])
+        piece.hi[axis] = rs_minf(piece.hi[axis], pos[j + 1])
+        if not box_is_empty(&piece):
+            box_grow(&bin_box[j], piece.lo, piece.hi)
+
+
+cdef int find_spatial_split(const float *corners, const Ref *refs, int start, int end,
+                            int room, const Box *nbox, int bins, float trav_cost,
+                            Split *best) noexcept nogil:
+    """Best binned SAH spatial split with at most ``room`` references in the children;
+    returns 0 when none exists."""
+    cdef Box bin_box[MAX_BINS]
+    cdef int n_enter[MAX_BINS]
+    cdef int n_exit[MAX_BINS]
+    cdef Box right_box[MAX_BINS]
+    cdef int right_count[MAX_BINS]
+    cdef float pos[MAX_BINS + 1]
+    cdef Box acc
+    cdef int a, i, k, first, last, n_left, found = 0
+    cdef float extent, scale, cost
+    cdef float parent_area = box_half_area(nbox)
+    best.cost = INFINITY
+    for a in range(3):
+        extent = nbox.hi[a] - nbox.lo[a]
+        if not (extent > 0):
+            continue
+        scale = bins * (1.0 - 1e-6) / extent
+        bin_planes(nbox, a, bins, pos)
+        for k in range(bins):
+            box_empty(&bin_box[k])
+            n_enter[k] = n_exit[k] = 0
+        for i in range(start, end):
+            ref_bins(&refs[i], a, pos, bins, scale, &first, &last)
+            n_enter[first] += 1
+            n_exit[last] += 1
+            if first == last:
+                box_grow(&bin_box[first], refs[i].box.lo, refs[i].box.hi)
+            else:
+                chop_into_bins(&corners[9 * refs[i].prim], &refs[i].box, a, pos, first, last,
+                               bin_box)
+        box_empty(&acc)
+        n_left = 0
+        for k in range(bins - 1, 0, -1):
+            box_grow(&acc, bin_box[k].lo, bin_box[k].hi)
+            n_left += n_exit[k]
+            right_box[k] = acc
+            right_count[k] = n_left
+        box_empty(&acc)
+        n_left = 0
+        for k in range(bins - 1):
+            box_grow(&acc, bin_box[k].lo, bin_box[k].hi)
+            n_left += n_enter[k]
+            if n_left == 0 or right_count[k + 1] == 0 or n_left + right_count[k + 1] > room:
+                continue
+            if box_is_empty(&acc) or box_is_empty(&right_box[k + 1]):
+                continue
+            cost = trav_cost + (n_left * box_half_area(&acc)
+                          + right_count[k + 1] * box_half_area(&right_box[k + 1])) / parent_area
+            if cost < best.cost:
+                best[0] = Split(a, k, cost, pos[k + 1], acc, right_box[k + 1], n_left,
+                                right_count[k + 1])
+                found = 1
+    return found
+
+
+cdef int spatial_partition(const float *corners, Ref *refs, Ref *spill, int start, int end,
+                           const Box *nbox, int bins, Split *s) noexcept nogil:
+    """Apply spatial split ``s``: the left references (cut ones clipped) stay at
+    ``refs[start:]``, the right ones go to ``spill[0:]``; returns how many stay left
+    (``s.n_right`` gets how many went right).  A cut reference goes whole to one side
+    when that costs less than having it on both (Stich et al.'s unsplitting), unless
+    that would empty the other side."""
+    cdef float pos[MAX_BINS + 1]
+    cdef float scale = bins * (1.0 - 1e-6) / (nbox.hi[s.axis] - nbox.lo[s.axis])
+    cdef int i, first, last, n_left = start, n_right = 0
+    cdef int count_left = s.n_left, count_right = s.n_right
+    cdef float area_left = box_half_area(&s.left), area_right = box_half_area(&s.right)
+    cdef float both, only_left, only_right
+    cdef Box grown_left, grown_right
+    cdef Ref r, lp, rp
+    bin_planes(nbox, s.axis, bins, pos)
+    for i in range(start, end):
+        r = refs[i]
+        ref_bins(&r, s.axis, pos, bins, scale, &first, &last)
+        if last <= s.bin:
+            refs[n_left] = r
+            n_left += 1
+            continue
+        if first > s.bin:
+            spill[n_right] = r
+            n_right += 1
+            continue
+        split_ref(&corners[9 * r.prim], &r, s.axis, s.pos, &lp, &rp)
+        if box_is_empty(&lp.box) or box_is_empty(&rp.box):
+            # the box is looser than the part it holds: that part lies on one side
+            if box_is_empty(&lp.box):
+                spill[n_right] = r
+                n_right += 1
+                count_left -= 1
+            else:
+                refs[n_left] = r
+                n_left += 1
+                count_right -= 1
+            continue
+        grown_left = s.left
+        box_grow(&grown_left, r.box.lo, r.box.hi)
+        grown_right = s.right
+        box_grow(&grown_right, r.box.lo, r.box.hi)
+        both = area_left * count_left + area_right * count_right
+        only_left = box_half_area(&grown_left) * count_left + area_right * (count_right - 1)
+        only_right = area_left * (count_left - 1) + box_half_area(&grown_right) * count_right
+        if only_left < both and only_left <= only_right and count_right > 1:
+            refs[n_left] = r
+            n_left += 1
+            s.left = grown_left
+            area_left = box_half_area(&grown_left)
+            count_right -= 1
+        elif only_right < both and count_left > 1:
+            spill[n_right] = r
+            n_right += 1
+            s.right = grown_right
+            area_right = box_half_area(&grown_right)
+            count_left -= 1
+        else:
+            refs[n_left] = lp
+            n_left += 1
+            spill[n_right] = rp
+            n_right += 1
+    s.n_right = n_right
+    return n_left - start
+
+
 cdef int build_nodes(const float[:, ::1] vertices, const int32_t[:, ::1] faces,
-                     int max_leaf, int bins, float trav_cost, rs_node *nodes,
-                     int32_t *order, int *depth) except -1 nogil:
-    """Build into ``nodes`` (room for 2n - 1) and ``order`` (n); returns the node count."""
+                     int max_leaf, int bins, float trav_cost, int capacity, float alpha,
+                     rs_node *nodes, int32_t *order, int *n_refs, int *depth) except -1 nogil:
+    """Build into ``nodes`` (room for 2 * capacity - 1) and ``order`` (capacity); returns
+    the node count, ``n_refs`` gets the references written to ``order``.
+
+    ``capacity`` (at least the triangle count n) bounds the references: with
+    capacity > n, spatial splits are tried where the object split's children
+    overlap by more than ``alpha`` times the root's area.
+    """
     cdef int n = faces.shape[0]
-    cdef float *tlo = <float *> malloc(3 * n * sizeof(float))
-    cdef float *thi = <float *> malloc(3 * n * sizeof(float))
-    cdef float *cent = <float *> malloc(3 * n * sizeof(float))
-    cdef Task *stack = <Task *> malloc((n + 64) * sizeof(Task))
-    cdef int i, a, c, sp = 0, n_nodes = 0, ni, count, mid, lo_i, hi_i, split_axis, split_bin
-    cdef float v, cost, scale
+    cdef Ref *refs = <Ref *> malloc((capacity + 1) * sizeof(Ref))
+    cdef bint spatial_on = capacity > n
+    cdef Ref *spill = <Ref *> malloc(capacity * sizeof(Ref)) if spatial_on else NULL
+    cdef float *corners = <float *> malloc(9 * n * sizeof(float)) if spatial_on else NULL
+    cdef Task *stack = <Task *> malloc((2 * capacity + STACK_SLACK) * sizeof(Task))
+    cdef int i, a, c, k, sp = 0, n_nodes = 0, ni, count, mid, lo_i, hi_i, n_left, n_right
+    cdef int room_left, right_start
+    cdef int64_t spare
+    cdef float v, scale, root_area = 0
+    cdef bint spatial
     cdef Task task
     cdef Box nbox, cbox
+    cdef Split obj, spat
     cdef rs_node *node
-    if tlo == NULL or thi == NULL or cent == NULL or stack == NULL:
-        free(tlo); free(thi); free(cent); free(stack)
+    if refs == NULL or stack == NULL or (spatial_on and (spill == NULL or corners == NULL)):
+        free(refs); free(spill); free(corners); free(stack)
         with gil:
             raise MemoryError()
     for i in range(n):
-        order[i] = i
+        refs[i].prim = i
         for a in range(3):
-            tlo[3 * i + a] = INFINITY
-            thi[3 * i + a] = -INFINITY
+            refs[i].box.lo[a] = INFINITY
+            refs[i].box.hi[a] = -INFINITY
             for c in range(3):
                 v = vertices[faces[i, c], a]
-                tlo[3 * i + a] = rs_minf(v, tlo[3 * i + a])
-                thi[3 * i + a] = rs_maxf(v, thi[3 * i + a])
-            cent[3 * i + a] = 0.5 * tlo[3 * i + a] + 0.5 * thi[3 * i + a]
+                if spatial_on:
+                    corners[9 * i + 3 * c + a] = v
+                refs[i].box.lo[a] = rs_minf(v, refs[i].box.lo[a])
+                refs[i].box.hi[a] = rs_maxf(v, refs[i].box.hi[a])
     depth[0] = 0
-    stack[0] = Task(0, n, -1, 1)
+    stack[0] = Task(0, n, capacity, -1, 1)
     sp = 1
     while sp > 0:
         sp -= 1
@@ -157,8 +505,13 @@ cdef int build_nodes(const float[:, ::1] vertices, const int32_t[:, ::1] faces,
         box_empty(&nbox)
         box_empty(&cbox)
         for i in range(task.start, task.end):
-            box_grow(&nbox, &tlo[3 * order[i]], &thi[3 * order[i]])
-            box_grow(&cbox, &cent[3 * order[i]], &cent[3 * order[i]])
+            box_grow(&nbox, refs[i].box.lo, refs[i].box.hi)
+            for a in range(3):
+                v = centroid(&refs[i], a)
+                cbox.lo[a] = rs_minf(v, cbox.lo[a])
+                cbox.hi[a] = rs_maxf(v, cbox.hi[a])
+        if ni == 0:
+            root_area = box_half_area(&nbox)
         node = &nodes[ni]
         for a in range(3):
             node.lo[a] = nbox.lo[a]
@@ -166,41 +519,78 @@ cdef int build_nodes(const float[:, ::1] vertices, const int32_t[:, ::1] faces,
         node.flags = 0
         count = task.end - task.start
         mid = -1
-        if count > 1 and find_split(cent, tlo, thi, order, task.start, task.end,
-                                    &cbox, &nbox, bins, trav_cost, &split_axis, &split_bin,
-                                    &cost):
-            if count > max_leaf or cost < count:
+        spatial = False
+        if count > 1:
+            if not find_split(refs, task.start, task.end, &cbox, &nbox, bins, trav_cost, &obj):
+                obj.cost = INFINITY
+            if (spatial_on and task.room - task.start > count
+                    and (obj.cost == INFINITY
+                         or overlap_half_area(&obj.left, &obj.right) > alpha * root_area)
+                    and find_spatial_split(corners, refs, task.start, task.end,
+                                           task.room - task.start, &nbox, bins, trav_cost,
+                                           &spat)
+                    and spat.cost < obj.cost and (count > max_leaf or spat.cost < count)):
+                n_left = spatial_partition(corners, refs, spill, task.start, task.end,
+                                           &nbox, bins, &spat)
+                n_right = spat.n_right
+                spatial = n_left > 0 and n_right > 0
+                if not spatial and n_left == 0:
+                    # every cut reference's part left of the plane fell outside its box,
+                    # so all went right whole: put them back and split by objects
+                    memcpy(&refs[task.start], spill, count * sizeof(Ref))
+            if spatial:
+                mid = task.start + n_left
+            elif obj.cost < INFINITY and (count > max_leaf or obj.cost < count):
                 # partition by bin, exactly as find_split binned them
-                scale = bins * (1.0 - 1e-6) / (cbox.hi[split_axis] - cbox.lo[split_axis])
+                scale = bins * (1.0 - 1e-6) / (cbox.hi[obj.axis] - cbox.lo[obj.axis])
                 lo_i = task.start
                 hi_i = task.end - 1
                 while lo_i <= hi_i:
-                    if bin_of(cent[3 * order[lo_i] + split_axis], cbox.lo[split_axis],
-                              scale, bins) <= split_bin:
+                    if bin_of(centroid(&refs[lo_i], obj.axis), cbox.lo[obj.axis],
+                              scale, bins) <= obj.bin:
                         lo_i += 1
                     else:
-                        order[lo_i], order[hi_i] = order[hi_i], order[lo_i]
+                        refs[lo_i], refs[hi_i] = refs[hi_i], refs[lo_i]
                         hi_i -= 1
                 mid = lo_i
-        elif count > max_leaf:
-            # all centroids coincide: split the range in the middle
-            split_axis = 0
-            for a in range(1, 3):
-                if nbox.hi[a] - nbox.lo[a] > nbox.hi[split_axis] - nbox.lo[split_axis]:
-                    split_axis = a
-            mid = task.start + count // 2
+            elif obj.cost == INFINITY and count > max_leaf:
+                # all centroids coincide: split the range in the middle
+                obj.axis = 0
+                for a in range(1, 3):
+                    if nbox.hi[a] - nbox.lo[a] > nbox.hi[obj.axis] - nbox.lo[obj.axis]:
+                        obj.axis = a
+                mid = task.start + count // 2
+            if mid >= 0 and not spatial:
+                n_left = mid - task.start
+                n_right = task.end - mid
         if mid < 0:
             node.offset = task.start
             node.count = <unsigned short> count
             node.axis = 0
-            qsort(&order[task.start], count, sizeof(int32_t), cmp_int32)
+            qsort(&refs[task.start], count, sizeof(Ref), cmp_ref_prim)
         else:
+            # share the spare room out in proportion to the children's references
+            spare = task.room - task.start - n_left - n_right
+            room_left = task.start + n_left + <int> (spare * n_left // (n_left + n_right))
+            right_start = room_left
+            if spatial:
+                memcpy(&refs[right_start], spill, n_right * sizeof(Ref))
+            elif right_start != mid:
+                memmove(&refs[right_start], &refs[mid], n_right * sizeof(Ref))
             node.count = 0
-            node.axis = <unsigned char> split_axis
-            stack[sp] = Task(mid, task.end, ni, task.depth + 1)
-            stack[sp + 1] = Task(task.start, mid, -1, task.depth + 1)
+            node.axis = <unsigned char> (spat.axis if spatial else obj.axis)
+            stack[sp] = Task(right_start, right_start + n_right, task.room, ni, task.depth + 1)
+            stack[sp + 1] = Task(task.start, task.start + n_left, room_left, -1, task.depth + 1)
             sp += 2
-    free(tlo); free(thi); free(cent); free(stack)
+    # the leaves, in node order, hold increasing reference ranges: close the gaps
+    n_refs[0] = 0
+    for i in range(n_nodes):
+        if nodes[i].count:
+            for k in range(nodes[i].count):
+                order[n_refs[0] + k] = refs[nodes[i].offset + k].prim
+            nodes[i].offset = n_refs[0]
+            n_refs[0] += nodes[i].count
+    free(refs); free(spill); free(corners); free(stack)
     return n_nodes
 
 
@@ -369,19 +759,25 @@ def collapse(unsigned char[::1] node_bytes, unsigned char[::1] out_bytes):
 
 
 def build(const float[:, ::1] vertices, const int32_t[:, ::1] faces, int max_leaf, int bins,
-          float trav_cost,
+          float trav_cost, int capacity, float alpha,
           unsigned char[::1] node_bytes, int32_t[::1] order, unsigned char[::1] tri_bytes):
-    """Build a BVH into preallocated buffers; returns (node count, depth)."""
-    cdef int n = faces.shape[0], n_nodes, depth = 0
+    """Build a BVH into preallocated buffers (nodes: 2 * capacity, order and triangles:
+    capacity >= the triangle count; capacity > it allows spatial splits);
+    returns (node count, reference count, depth)."""
+    cdef int n = faces.shape[0], n_nodes, n_refs = 0, depth = 0
     if not 1 <= bins <= MAX_BINS:
         raise ValueError(f"bins must be in 1..{MAX_BINS}, got {bins}")
+    if not (n <= capacity and order.shape[0] >= capacity
+            and node_bytes.shape[0] >= (2 * capacity) * <Py_ssize_t> sizeof(rs_node)
+            and tri_bytes.shape[0] >= capacity * <Py_ssize_t> sizeof(rs_tri)):
+        raise ValueError(f"build: buffers too small for a capacity of {capacity} references")
     cdef rs_node *nodes = <rs_node *> &node_bytes[0]
     cdef rs_tri *tris = <rs_tri *> &tri_bytes[0]
     with nogil:
-        n_nodes = build_nodes(vertices, faces, max_leaf, bins, trav_cost, nodes, &order[0],
-                              &depth)
-        prepare_triangles(vertices, faces, &order[0], n, tris)
-    return n_nodes, depth
+        n_nodes = build_nodes(vertices, faces, max_leaf, bins, trav_cost, capacity, alpha,
+                              nodes, &order[0], &n_refs, &depth)
+        prepare_triangles(vertices, faces, &order[0], n_refs, tris)
+    return n_nodes, n_refs, depth
 
 
 def triangles(const float[:, ::1] vertices, const int32_t[:, ::1] faces,
@@ -393,8 +789,9 @@ def triangles(const float[:, ::1] vertices, const int32_t[:, ::1] faces,
 
 def refit(const float[:, ::1] vertices, const int32_t[:, ::1] faces, const int32_t[::1] order,
           unsigned char[::1] node_bytes, unsigned char[::1] tri_bytes):
-    """Move the triangles to new vertex positions and refit every box."""
-    cdef int n = faces.shape[0]
+    """Move the triangles to new vertex positions and refit every box (a leaf's box from
+    its triangles' whole boxes, also where spatial splits had cut them)."""
+    cdef int n = order.shape[0]
     cdef int n_nodes = node_bytes.shape[0] // sizeof(rs_node)
     with nogil:
         prepare_triangles(vertices, faces, &order[0], n, <rs_tri *> &tri_bytes[0])

@@ -1,10 +1,12 @@
 """The bounding volume hierarchy every traversal walks.
 
-A binary BVH built with binned SAH (Cython, nogil) and stored as a flat
-depth-first array of 32-byte nodes, exposed as the NumPy structured dtype
-:data:`NODE_DTYPE` (the C struct ``rs_node`` of ``raysort/types.h``).
-Triangles are stored in BVH order as :data:`TRI_DTYPE` records (``v0``,
-edges ``e1``/``e2`` and the input index ``id``), ready for Moller-Trumbore.
+A binary BVH built with binned SAH (Cython, nogil), optionally with spatial
+splits (SBVH), and stored as a flat depth-first array of 32-byte nodes,
+exposed as the NumPy structured dtype :data:`NODE_DTYPE` (the C struct
+``rs_node`` of ``raysort/types.h``).  Triangles are stored in BVH order as
+:data:`TRI_DTYPE` records (``v0``, edges ``e1``/``e2`` and the input index
+``id``), ready for Moller-Trumbore; with spatial splits a triangle may be
+stored in several leaves.
 """
 from __future__ import annotations
 
@@ -28,13 +30,19 @@ __all__ = ["BVH", "Wide8", "PRESETS", "NODE_DTYPE", "NODE4_DTYPE", "NODE8_DTYPE"
 #: ``raysort bench --bvh manta``); parameters given next to a preset override it.
 PRESETS = {
     # binned SAH with DynBVH's costs (C_trav = C_isec = 1): leaves of ~2 triangles
-    "default": {"max_leaf": 8, "bins": 16, "traversal_cost": 1.0},
+    "default": {"max_leaf": 8, "bins": 16, "traversal_cost": 1.0, "spatial_splits": 0.0,
+                "split_alpha": 1e-5},
     # leaves of tens of triangles, as the paper's Manta counts imply: its Table I has
     # about ten triangle tests per box test (Sibenik: 16 ranged, 5.5 partition, 7 ranged
     # + sorting).  A node visit costing 64 triangle tests, leaves of up to 256, gives
     # ~80 triangles per leaf on Sibenik and 10, 8.5 and 14 on its diffuse rays.
-    "manta": {"max_leaf": 256, "bins": 16, "traversal_cost": 64.0},
+    "manta": {"max_leaf": 256, "bins": 16, "traversal_cost": 64.0, "spatial_splits": 0.0,
+              "split_alpha": 1e-5},
 }
+
+#: largest ``spatial_splits`` reference budget (references <= 5x the triangles)
+MAX_SPATIAL_SPLITS = 4.0
+
 
 class Wide8(NamedTuple):
     """The BVH collapsed to 8-wide nodes (``BVH.wide8``, for the ``wide8`` traversal)."""
@@ -84,12 +92,25 @@ class BVH:
     traversal_cost : float, default 1.0
         SAH cost of visiting a node relative to one triangle test (DynBVH: 1);
         larger values make shallower trees with bigger leaves.
+    spatial_splits : float, default 0.0
+        the reference budget of spatial splits (SBVH, Stich et al. 2009): a
+        node may be split by a plane that cuts triangles, each cut triangle
+        then sits in both children, so that long or diagonal triangles stop
+        bloating the boxes; the leaves hold at most ``(1 + spatial_splits)``
+        times as many triangle references as the mesh has triangles (0: no
+        spatial splits, the plain binned-SAH tree; 0..4).
+    split_alpha : float, default 1e-5
+        spatial splits are tried only in nodes whose best object split's
+        children overlap by more than ``split_alpha`` times the root's surface
+        area (Stich et al.'s alpha; 0 tries them everywhere, 1 nowhere; 0..1).
 
     Attributes
     ----------
     nodes : NODE_DTYPE array, depth first (root first)
     triangles : TRI_DTYPE array in BVH order
-    order : int32 array, ``triangles[p]`` is input triangle ``order[p]``
+    order : int32 array, ``triangles[p]`` is input triangle ``order[p]`` (each
+        triangle once, or with spatial splits once or more)
+    references : int, ``len(order)``
     depth : int, number of levels
     bounds : float32 (2, 3), the root box
     vertices, faces : the mesh it was built over (vertices move with refit)
@@ -108,21 +129,33 @@ class BVH:
     WIDE8_MAX_LEAF = 32
 
     def __init__(self, vertices, faces, *, preset="default", max_leaf=None, bins=None,
-                 traversal_cost=None):
+                 traversal_cost=None, spatial_splits=None, split_alpha=None):
         params = self.check_parameters(preset=preset, max_leaf=max_leaf, bins=bins,
-                                       traversal_cost=traversal_cost)
+                                       traversal_cost=traversal_cost,
+                                       spatial_splits=spatial_splits, split_alpha=split_alpha)
         self.preset = preset
         self.max_leaf, self.bins = params["max_leaf"], params["bins"]
         self.traversal_cost = params["traversal_cost"]
+        self.spatial_splits, self.split_alpha = params["spatial_splits"], params["split_alpha"]
         vertices, faces = check_mesh(vertices, faces)
         n = len(faces)
-        nodes = np.zeros(2 * n, dtype=NODE_DTYPE)
-        self.order = np.zeros(n, dtype=np.int32)
-        self.triangles = np.zeros(n, dtype=TRI_DTYPE)
-        n_nodes, self.depth = _bvh.build(
-            vertices, faces, self.max_leaf, self.bins, self.traversal_cost, nodes.view(np.uint8).reshape(-1),
-            self.order, self.triangles.view(np.uint8).reshape(-1))
+        capacity = n + int(self.spatial_splits * n)
+        if 2 * capacity + 1 > np.iinfo(np.int32).max:
+            raise ConfigError(f"bvh: {n} triangles with spatial_splits={self.spatial_splits} "
+                              f"need more references than a BVH can index")
+        start = time.perf_counter()
+        nodes = np.zeros(max(2 * capacity, 1), dtype=NODE_DTYPE)
+        order = np.zeros(max(capacity, 1), dtype=np.int32)
+        triangles = np.zeros(max(capacity, 1), dtype=TRI_DTYPE)
+        n_nodes, n_refs, self.depth = _bvh.build(
+            vertices, faces, self.max_leaf, self.bins, self.traversal_cost, capacity,
+            self.split_alpha, nodes.view(np.uint8).reshape(-1), order,
+            triangles.view(np.uint8).reshape(-1))
         self.nodes = nodes[:n_nodes].copy()
+        self.order, self.triangles = order[:n_refs].copy(), triangles[:n_refs].copy()
+        self.references = n_refs
+        #: seconds the build took (the binary tree and its triangles)
+        self.build_seconds = time.perf_counter() - start
         self.vertices, self.faces = vertices, faces
         self._update_bounds()
         self._wide = None
@@ -144,7 +177,10 @@ class BVH:
         return {"max_leaf": integer("max_leaf", p["max_leaf"], 1, 65535),
                 "bins": integer("bins", p["bins"], 1, 64),
                 "traversal_cost": number("traversal_cost", p["traversal_cost"], 0, 1000,
-                                         lo_open=True)}
+                                         lo_open=True),
+                "spatial_splits": number("spatial_splits", p["spatial_splits"], 0,
+                                         MAX_SPATIAL_SPLITS),
+                "split_alpha": number("split_alpha", p["split_alpha"], 0, 1)}
 
     @property
     def wide(self):
@@ -184,7 +220,12 @@ class BVH:
         self.bounds = np.stack([self.nodes[0]["lo"], self.nodes[0]["hi"]]).astype(np.float32)
 
     def refit(self, vertices):
-        """Move the triangles to new positions of the same vertices and refit the boxes."""
+        """Move the triangles to new positions of the same vertices and refit the boxes.
+
+        The tree keeps its shape.  With spatial splits a leaf's box becomes the box
+        of its triangles' whole boxes (the cuts are not redone): conservative, so
+        every hit stays exact, but the tree loses what the cuts gained; build a new
+        BVH after large motions."""
         vertices, faces = check_mesh(vertices, self.faces)
         self.vertices = vertices
         _bvh.refit(vertices, faces, self.order, self.nodes.view(np.uint8).reshape(-1),
@@ -209,9 +250,12 @@ class BVH:
             "depth": int(self.depth),
             "mean_leaf_size": float(nodes["count"][leaf].mean()),
             "max_leaf_size": int(nodes["count"][leaf].max()),
+            "references": int(self.references),
+            "triangles": int(len(self.faces)),
             "sah_cost": float(sah),
+            "build_seconds": float(self.build_seconds),
         }
 
     def __repr__(self):
-        return (f"BVH(triangles={len(self.triangles)}, nodes={len(self.nodes)}, "
-                f"depth={self.depth})")
+        return (f"BVH(triangles={len(self.faces)}, references={self.references}, "
+                f"nodes={len(self.nodes)}, depth={self.depth})")
