@@ -1,0 +1,147 @@
+"""What spatial splits (SBVH) buy: build time, SAH cost, references and trace speed.
+
+    python tests/benchmarks/spatial_splits.py [scene ...] [--budgets 0,0.1,0.3,1]
+                                              [--alpha 1e-5] [--traversals wide8,wide]
+                                              [--rounds 7] [--size 256] [--json out.json]
+
+For each scene (default: sibenik, sponza, forest) and each ``spatial_splits`` reference
+budget (0: no spatial splits, the baseline) the BVH is built ``--build-rounds`` times in
+interleaved rounds (the thread's CPU time, median [min, max]) and its SAH cost (binary,
+``BVH.stats``; wide8, ``Wide8.sah_cost``) and reference count are reported.  Then the
+first-bounce diffuse rays of a ``--size`` square render at 1 spp
+(:func:`raysort.workloads.workload`) are traced through ``Pipeline.trace`` (sorter ``nah``,
+one thread, checks off) for every budget x traversal, in interleaved rounds shuffled per
+round after an untimed warm-up round (:func:`raysort.bench.rounds.run_rounds`), timed by the
+thread's CPU clock.  Reported: Mrays/s median [min, max] and the median [min, max] of the
+per-round speed ratios over budget 0 with the same traversal.  Every configuration's hits
+must equal the first one's (t bit for bit, prim), or the run fails.  The header names the
+CPU, the ISA and the load average.
+"""
+import argparse
+import json
+import sys
+import time
+
+import numpy as np
+
+import raysort
+from raysort import isa
+from raysort.bench.report import load_average, machine_info
+from raysort.bench.rounds import ratios, run_rounds, summary
+from raysort.bvh import BVH
+from raysort.scene import load_scene
+from raysort.workloads import workload
+
+
+def _floats(text):
+    return [float(x) for x in text.split(",")]
+
+
+def _names(text):
+    return [x for x in text.split(",") if x]
+
+
+def timed(fn):
+    """``fn``'s thread CPU time, in seconds."""
+    start = time.thread_time()
+    fn()
+    return time.thread_time() - start
+
+
+def measure_builds(scene, budgets, alpha, rounds):
+    """Build time (interleaved rounds), SAH and references per budget."""
+    def build(b):
+        return BVH(scene.vertices, scene.faces, spatial_splits=b, split_alpha=alpha)
+
+    seconds, _ = run_rounds([lambda b=b: timed(lambda: build(b)) for b in budgets], rounds)
+    rows = []
+    for k, b in enumerate(budgets):
+        bvh = build(b)
+        wide8 = bvh.wide8
+        stats = bvh.stats()
+        rows.append({"budget": b, "build_s": summary([r[k] for r in seconds]),
+                     "wide8_collapse_s": wide8.build_seconds, "references": stats["references"],
+                     "triangles": stats["triangles"], "sah_binary": stats["sah_cost"],
+                     "sah_wide8": wide8.sah_cost, "depth": stats["depth"]})
+    return rows
+
+
+def measure_traces(scene, budgets, alpha, traversals, rounds, size):
+    """Mrays/s per (budget, traversal) on the same diffuse rays, and the ratios over
+    budget 0 per round; the hits of every configuration must agree."""
+    work = workload(scene, "diffuse:depth=1", width=size, height=size, spp=1, seed=1, tile=32)
+    configs = [(b, t) for t in traversals for b in budgets]
+    pipes = [raysort.Pipeline(scene, sorter="nah", traversal=t, threads=1, check_plugins=False,
+                              bvh={"spatial_splits": b, "split_alpha": alpha})
+             for b, t in configs]
+    hits = [None] * len(configs)
+
+    def run(k):
+        def go():
+            hits[k] = pipes[k].trace(work.rays, work.packets)[0]
+        return timed(go)
+
+    seconds, _ = run_rounds([lambda k=k: run(k) for k in range(len(configs))], rounds)
+    first = hits[0]
+    for (b, t), h in zip(configs, hits):
+        if not (np.array_equal(h.prim, first.prim)
+                and np.array_equal(h.t.view(np.uint32), first.t.view(np.uint32))):
+            sys.exit(f"spatial_splits={b} with {t}: hits differ from the first configuration's")
+    n = len(work.rays)
+    rows = []
+    for k, (b, t) in enumerate(configs):
+        base = configs.index((budgets[0], t))
+        speeds = [n / r[k] / 1e6 for r in seconds]
+        rows.append({"budget": b, "traversal": t, "rays": n, "mrays_s": summary(speeds),
+                     "vs_first_budget": summary(ratios(seconds, k, base))})
+    return rows
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("scenes", nargs="*", default=["sibenik", "sponza", "forest"])
+    ap.add_argument("--budgets", type=_floats, default=[0.0, 0.1, 0.3, 1.0])
+    ap.add_argument("--alpha", type=float, default=1e-5)
+    ap.add_argument("--traversals", type=_names, default=["wide8", "wide"])
+    ap.add_argument("--rounds", type=int, default=7)
+    ap.add_argument("--build-rounds", type=int, default=3)
+    ap.add_argument("--size", type=int, default=256)
+    ap.add_argument("--json")
+    args = ap.parse_args(argv)
+    info = machine_info()
+    print(f"CPU: {info['cpu']}; ISA: {isa.active()}; load average {load_average()}; one "
+          f"thread; split_alpha {args.alpha}; {args.rounds} interleaved rounds after a warm-up; "
+          f"thread CPU time; median [min, max]")
+    results = []
+    for name in args.scenes:
+        scene = load_scene(name)
+        builds = measure_builds(scene, args.budgets, args.alpha, args.build_rounds)
+        traces = measure_traces(scene, args.budgets, args.alpha, args.traversals, args.rounds,
+                                args.size)
+        print(f"\n### {name} ({len(scene.faces)} triangles; {traces[0]['rays']} first-bounce "
+              f"diffuse rays)\n")
+        print("| spatial_splits | build s | references | SAH binary | SAH wide8 |" +
+              "".join(f" {t} Mrays/s | {t} vs {args.budgets[0]:g} |" for t in args.traversals))
+        print("|---|---|---|---|---|" + "---|---|" * len(args.traversals))
+        for b_row in builds:
+            b = b_row["budget"]
+            s = b_row["build_s"]
+            cells = [f"{b:g}", f"{s['median']:.3f} [{s['min']:.3f}, {s['max']:.3f}]",
+                     f"{b_row['references']} ({b_row['references'] / b_row['triangles']:.3f}x)",
+                     f"{b_row['sah_binary']:.2f}", f"{b_row['sah_wide8']:.2f}"]
+            for t in args.traversals:
+                row = next(r for r in traces if r["budget"] == b and r["traversal"] == t)
+                m, v = row["mrays_s"], row["vs_first_budget"]
+                cells += [f"{m['median']:.3f} [{m['min']:.3f}, {m['max']:.3f}]",
+                          f"{v['median']:.3f}x [{v['min']:.3f}, {v['max']:.3f}]"]
+            print("| " + " | ".join(cells) + " |")
+        sys.stdout.flush()
+        results.append({"scene": name, "builds": builds, "traces": traces})
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as fh:
+            json.dump({"machine": info, "isa": isa.active(), "load": load_average(),
+                       "args": vars(args), "results": results}, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()
