@@ -44,8 +44,11 @@ ARGUMENTS = {
     "traversal": plugin("traversals"), "shader": plugin("shaders"),
     "tile": number(1, 64), "threads": number(1, 3), "batch_rays": number(1, 3000),
     "check_plugins": (st.booleans(), JUNK),
-    "bvh": (st.one_of(st.none(), st.fixed_dictionaries({"max_leaf": st.integers(1, 16)})),
+    "bvh": (st.one_of(st.none(), st.fixed_dictionaries(
+                {"max_leaf": st.integers(1, 16)},
+                optional={"spatial_splits": st.floats(0, 4), "split_alpha": st.floats(0, 1)})),
             st.one_of(st.dictionaries(st.sampled_from(["max_leaf", "bins", "traversal_cost",
+                                                       "spatial_splits", "split_alpha",
                                                        "leaf"]), VALUES, max_size=2), JUNK)),
     "width": number(1, 40), "height": number(1, 40), "spp": number(1, 3),
     "seed": number(0, 2**32 - 1),
