@@ -1,13 +1,14 @@
 """What spatial splits (SBVH) buy: build time, SAH cost, references and trace speed.
 
     python tests/benchmarks/spatial_splits.py [scene ...] [--budgets 0,0.1,0.3,1]
-                                              [--alpha 1e-5] [--traversals wide8,wide]
+                                              [--alpha A] [--traversals wide8,wide]
                                               [--rounds 7] [--size 256] [--json out.json]
 
 For each scene (default: sibenik, sponza, forest) and each ``spatial_splits`` reference
-budget (0: no spatial splits, the baseline) the BVH is built ``--build-rounds`` times in
-interleaved rounds (the thread's CPU time, median [min, max]) and its SAH cost (binary,
-``BVH.stats``; wide8, ``Wide8.sah_cost``) and reference count are reported.  Then the
+budget (0: no spatial splits, the baseline), with ``split_alpha`` ``--alpha`` (default: the
+BVH's), the BVH is built ``--build-rounds`` times in interleaved rounds (the thread's CPU
+time, median [min, max]) and its SAH cost (binary, ``BVH.stats``; wide8,
+``Wide8.sah_cost``) and reference count are reported.  Then the
 first-bounce diffuse rays of a ``--size`` square render at 1 spp
 (:func:`raysort.workloads.workload`) are traced through ``Pipeline.trace`` (sorter ``nah``,
 one thread, checks off) for every budget x traversal, in interleaved rounds shuffled per
@@ -101,13 +102,15 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("scenes", nargs="*", default=["sibenik", "sponza", "forest"])
     ap.add_argument("--budgets", type=_floats, default=[0.0, 0.1, 0.3, 1.0])
-    ap.add_argument("--alpha", type=float, default=1e-5)
+    ap.add_argument("--alpha", type=float, default=None,
+                    help="split_alpha (default: the BVH default)")
     ap.add_argument("--traversals", type=_names, default=["wide8", "wide"])
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--build-rounds", type=int, default=3)
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--json")
     args = ap.parse_args(argv)
+    args.alpha = BVH.check_parameters(split_alpha=args.alpha)["split_alpha"]
     info = machine_info()
     print(f"CPU: {info['cpu']}; ISA: {isa.active()}; load average {load_average()}; one "
           f"thread; split_alpha {args.alpha}; {args.rounds} interleaved rounds after a warm-up; "
