@@ -16,7 +16,8 @@ from raysort.errors import ConfigError
 from raysort.rays import gather, scatter_occluded
 from raysort.reference import brute_force
 
-from _helpers import assert_same_hits, exact_traversals, grid_scene, grid_tie_rays, random_rays
+from _helpers import (assert_same_hits, batch, exact_traversals, grid_scene, grid_tie_rays,
+                      random_rays)
 from test_bvh import real_depth, trace, triangle_soup
 
 F32 = np.float32
@@ -246,7 +247,15 @@ def test_adversarial_hits_match_brute_force_on_every_isa(each_isa, rng):
             assert_exact(bvh, V, F, rays, rng, f"{each_isa} {label} max_leaf={max_leaf}")
     V, F = grid_scene(rng, zero_area=20)
     bvh = BVH(V, F, max_leaf=2, spatial_splits=2.0, split_alpha=0.0)
+    assert bvh.references > len(F)
     assert_exact(bvh, V, F, grid_tie_rays(rng, 1500), rng, f"{each_isa} grid ties")
+    # the 16 bins of the 8-unit grid put planes on its half-integer lines: rays in
+    # those planes (a zero direction component, 0 * inf slabs), hitting edges and vertices
+    n = 1500
+    o = np.column_stack([rng.integers(0, 17, size=(n, 2)) / 2.0, np.full(n, 3.0)])
+    d = np.column_stack([rng.choice([-1.0, -0.5, 0.0, 0.5, 1.0], size=(n, 2)), np.full(n, -2.0)])
+    d[np.arange(n), rng.integers(0, 2, n)] = 0.0                 # stay in an x or y plane
+    assert_exact(bvh, V, F, batch(o, d), rng, f"{each_isa} rays in the split planes")
 
 
 def test_all_degenerate_mesh_is_never_hit(rng):
