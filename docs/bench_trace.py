@@ -23,7 +23,7 @@ instead (``Pipeline.render``, 4 spp, lambert depth 2) and reports Mpixels/s.  Ea
 configuration once in an order rotated by one per round (interleaved, round 0 warms
 up and is dropped).  Reported: Mrays/s as the median over rounds with [min, max], and
 the medians [min, max] of the per-round speed ratios against the reference
-configurations (``--against``, default ``embree`` and ``nah+wide``).  Times are the
+configurations (``--against``, default ``direct:embree``, ``embree`` and ``nah+wide8``).  Times are the
 measuring thread's CPU time (``--clock cpu``, default; robust to other load on the
 machine) or wall time (``--clock wall``).  The header names the CPU and the ISA.
 """
@@ -42,8 +42,9 @@ from raysort import isa
 from raysort.bench.report import machine_info
 from raysort.workloads import camera_rays, workload
 
-DEFAULT_CONFIGS = ["nah+wide8", "none+wide8", "two_point+wide8", "nah+wide", "none+wide",
-                   "nah+ranged", "none+ranged@8", "embree"]
+DEFAULT_CONFIGS = ["nah+wide8", "none+wide8", "two_point+wide8", "nah+stream", "none+stream",
+                   "nah+ranged", "none+ranged@8", "embree", "direct:embree", "direct:mitsuba",
+                   "direct:mitsuba:coherent=true"]
 CLOCKS = {"cpu": time.thread_time, "wall": time.perf_counter}
 DIRECT = "direct:"      # a library traversal's own query alone (see the module docstring)
 
@@ -134,7 +135,7 @@ def main(argv=None):
     ap.add_argument("--kinds", nargs="+", default=["diffuse", "camera"],
                     choices=["diffuse", "camera", "frame"])
     ap.add_argument("--configs", nargs="+", default=DEFAULT_CONFIGS)
-    ap.add_argument("--against", nargs="+", default=["embree", "nah+wide"])
+    ap.add_argument("--against", nargs="+", default=["direct:embree", "embree", "nah+wide8"])
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--clock", choices=sorted(CLOCKS), default="cpu")
