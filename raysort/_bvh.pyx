@@ -8,24 +8,24 @@ input index.  Split costs follow DynBVH's SAH with C_isec = 1 and C_trav =
 ``max_leaf`` triangles and no binned split is cheaper than intersecting them
 all.
 
-With a reference budget (``spatial_budget`` > 0) the builder is an SBVH (Stich,
-Friedrich and Dietrich, "Spatial splits in bounding volume hierarchies", HPG
-2009): it works on references (a triangle and a box holding the part of it the
-node owns), and besides the object split over the reference centroids it bins
-the node's box itself and chops every reference into the bins it spans (the
-triangle's edges cut by each bin plane, the parts' boxes intersected with the
-reference's box).  A spatial split is tried only where the object split's
-children overlap by more than ``alpha`` times the root's area, is taken when
-its SAH cost is lower, and each reference cut by its plane may still go to one
-side whole when that is cheaper (reference unsplitting).  A triangle may then
-sit in several leaves; the references never outnumber ``(1 + spatial_budget)``
-times the triangles, the room being shared out between the children in
-proportion to their references.
+With room for more references than triangles (``capacity`` > n, from the BVH's
+``spatial_splits`` budget) the builder is an SBVH (Stich, Friedrich and
+Dietrich, "Spatial splits in bounding volume hierarchies", HPG 2009): it works
+on references (a triangle and a box holding the part of it the node owns), and
+besides the object split over the reference centroids it bins the node's box
+itself and chops every reference into the bins it spans (the triangle's edges
+cut by each bin plane, the parts' boxes intersected with the reference's box).
+A spatial split is tried only where the object split's children overlap by more
+than ``alpha`` times the root's area, is taken when its SAH cost is lower, and
+each reference cut by its plane may still go to one side whole when that is
+cheaper (reference unsplitting).  A triangle may then sit in several leaves;
+the references never outnumber ``capacity``, the spare room being shared out
+between the children in proportion to their references.
 """
 from libc.stdlib cimport malloc, free, qsort
 from libc.string cimport memmove, memcpy
 from libc.stdint cimport int32_t, int64_t, uint32_t
-from libc.math cimport INFINITY, fabs
+from libc.math cimport INFINITY, fabs, ldexp
 from raysort._types cimport (rs_node, rs_node4, rs_node8, rs_tri, rs_tri8, rs_minf, rs_maxf,
                              RS_DEGENERATE_SIN2)
 
@@ -33,7 +33,7 @@ import numpy as np
 
 cdef enum:
     MAX_BINS = 64
-    STACK_SLACK = 64    # tasks beyond one per reference on the build stack
+    STACK_SLACK = 64    # build-stack tasks beyond two per reference
 
 
 cdef struct Box:
@@ -47,9 +47,9 @@ cdef struct Ref:
 
 
 cdef struct Task:
-    int start       # references [start, end) of the reference array ...
+    int start       # the task's references: [start, end) of the reference array,
     int end
-    int room        # ... with room for them to grow into up to `room`
+    int room        # which they may grow into up to index `room` (spatial splits)
     int parent      # node whose `offset` must point here (right children), or -1
     int depth
 
@@ -155,8 +155,8 @@ cdef int find_split(const Ref *refs, int start, int end, const Box *cbox, const 
             n_left += bin_count[k]
             if n_left == 0 or right_count[k + 1] == 0:
                 continue
-            cost = trav_cost + (n_left * box_half_area(&acc)
-                          + right_count[k + 1] * box_half_area(&right_box[k + 1])) / parent_area
+            cost = trav_cost + (n_left * box_half_area(&acc) + right_count[k + 1]
+                                * box_half_area(&right_box[k + 1])) / parent_area
             if cost < best.cost:
                 best[0] = Split(a, k, cost, 0, acc, right_box[k + 1], n_left, right_count[k + 1])
                 found = 1
@@ -214,7 +214,7 @@ cdef void split_ref(const float *tri, const Ref *ref, int axis, float pos, Ref *
     cdef float qlo[3]
     cdef float qhi[3]
     cdef double t, q, err
-    cdef double err_scale = 2.0 ** CROSSING_ERROR_EXPONENT
+    cdef double err_scale = ldexp(1.0, CROSSING_ERROR_EXPONENT)
     box_empty(&lb)
     box_empty(&rb)
     for e in range(3):
@@ -374,8 +374,8 @@ cdef int find_spatial_split(const float *corners, const Ref *refs, int start, in
                 continue
             if box_is_empty(&acc) or box_is_empty(&right_box[k + 1]):
                 continue
-            cost = trav_cost + (n_left * box_half_area(&acc)
-                          + right_count[k + 1] * box_half_area(&right_box[k + 1])) / parent_area
+            cost = trav_cost + (n_left * box_half_area(&acc) + right_count[k + 1]
+                                * box_half_area(&right_box[k + 1])) / parent_area
             if cost < best.cost:
                 best[0] = Split(a, k, cost, pos[k + 1], acc, right_box[k + 1], n_left,
                                 right_count[k + 1])

@@ -113,6 +113,7 @@ class BVH:
     order : int32 array, ``triangles[p]`` is input triangle ``order[p]`` (each
         triangle once, or with spatial splits once or more)
     references : int, ``len(order)``
+    build_seconds : float, the time the build took
     depth : int, number of levels
     bounds : float32 (2, 3), the root box
     vertices, faces : the mesh it was built over (vertices move with refit)
@@ -154,9 +155,9 @@ class BVH:
             self.split_alpha, nodes.view(np.uint8).reshape(-1), order,
             triangles.view(np.uint8).reshape(-1))
         self.nodes = nodes[:n_nodes].copy()
-        self.order, self.triangles = order[:n_refs].copy(), triangles[:n_refs].copy()
+        self.order, self.triangles = ((order, triangles) if n_refs == len(order)
+                                      else (order[:n_refs].copy(), triangles[:n_refs].copy()))
         self.references = n_refs
-        #: seconds the build took (the binary tree and its triangles)
         self.build_seconds = time.perf_counter() - start
         self.vertices, self.faces = vertices, faces
         self._update_bounds()

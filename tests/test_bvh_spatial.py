@@ -306,3 +306,11 @@ def test_pipeline_and_bench_take_spatial_splits(sibenik):
     pipe = raysort.Pipeline(sibenik, bvh=params)
     assert (pipe.bvh.spatial_splits, pipe.bvh.split_alpha) == (0.25, 1e-4)
     assert pipe.bvh.references > len(sibenik.faces)
+
+
+@pytest.mark.parametrize("traversal", ["wide8", "stream", "ranged"])
+def test_renders_are_bit_identical_with_and_without_spatial_splits(sponza, traversal):
+    """A whole frame (two bounces) through an SBVH is the plain tree's, bit for bit."""
+    images = [raysort.Pipeline(sponza, traversal=traversal, bvh=bvh).render(40, 30, spp=2)
+              .image.tobytes() for bvh in ({}, {"spatial_splits": 0.3})]
+    assert images[0] == images[1]
