@@ -1,22 +1,24 @@
-"""What spatial splits (SBVH) buy: build time, SAH cost, references and trace speed.
+"""What spatial splits (SBVH) buy: build time, SAH cost, references and speed.
 
     python tests/benchmarks/spatial_splits.py [scene ...] [--budgets 0,0.1,0.3,1]
                                               [--alpha A] [--traversals wide8,wide]
-                                              [--rounds 7] [--size 256] [--json out.json]
+                                              [--kinds diffuse,frame] [--rounds 7]
+                                              [--size 256] [--json out.json]
 
 For each scene (default: sibenik, sponza, forest) and each ``spatial_splits`` reference
 budget (0: no spatial splits, the baseline), with ``split_alpha`` ``--alpha`` (default: the
 BVH's), the BVH is built ``--build-rounds`` times in interleaved rounds (the thread's CPU
 time, median [min, max]) and its SAH cost (binary, ``BVH.stats``; wide8,
-``Wide8.sah_cost``) and reference count are reported.  Then the
-first-bounce diffuse rays of a ``--size`` square render at 1 spp
-(:func:`raysort.workloads.workload`) are traced through ``Pipeline.trace`` (sorter ``nah``,
-one thread, checks off) for every budget x traversal, in interleaved rounds shuffled per
-round after an untimed warm-up round (:func:`raysort.bench.rounds.run_rounds`), timed by the
-thread's CPU clock.  Reported: Mrays/s median [min, max] and the median [min, max] of the
-per-round speed ratios over budget 0 with the same traversal.  Every configuration's hits
-must equal the first one's (t bit for bit, prim), or the run fails.  The header names the
-CPU, the ISA and the load average.
+``Wide8.sah_cost``) and reference count are reported.  Then, for every budget x traversal
+(sorter ``nah``, one thread, checks off), ``diffuse`` traces the first-bounce diffuse rays
+of a ``--size`` square render at 1 spp (:func:`raysort.workloads.workload`) through
+``Pipeline.trace``, and ``frame`` renders a ``--size`` square frame at 4 spp (lambert,
+depth 2) with ``Pipeline.render``; each in interleaved rounds shuffled per round after an
+untimed warm-up round (:func:`raysort.bench.rounds.run_rounds`), timed by the thread's CPU
+clock.  Reported: Mrays/s (Mpixels/s) median [min, max] and the median [min, max] of the
+per-round speed ratios over the first budget with the same traversal.  Every
+configuration's hits (t bit for bit, prim) or image must equal the first one's, or the run
+fails.  The header names the CPU, the ISA and the load average.
 """
 import argparse
 import json
@@ -67,33 +69,46 @@ def measure_builds(scene, budgets, alpha, rounds):
     return rows
 
 
-def measure_traces(scene, budgets, alpha, traversals, rounds, size):
-    """Mrays/s per (budget, traversal) on the same diffuse rays, and the ratios over
-    budget 0 per round; the hits of every configuration must agree."""
-    work = workload(scene, "diffuse:depth=1", width=size, height=size, spp=1, seed=1, tile=32)
+def measure_speeds(scene, kind, budgets, alpha, traversals, rounds, size):
+    """Speed per (budget, traversal), and its ratios over budget 0 per round: ``diffuse``
+    traces the same first-bounce diffuse rays (Mrays/s; every configuration's hits must
+    agree), ``frame`` renders a frame, 4 spp, lambert depth 2 (Mpixels/s; every image
+    must agree)."""
     configs = [(b, t) for t in traversals for b in budgets]
     pipes = [raysort.Pipeline(scene, sorter="nah", traversal=t, threads=1, check_plugins=False,
                               bvh={"spatial_splits": b, "split_alpha": alpha})
              for b, t in configs]
-    hits = [None] * len(configs)
+    results = [None] * len(configs)
+    if kind == "frame":
+        n = size * size
+
+        def result(k):
+            return pipes[k].render(size, size, spp=4, seed=0).image.tobytes()
+    else:
+        work = workload(scene, "diffuse:depth=1", width=size, height=size, spp=1, seed=1,
+                        tile=32)
+        n = len(work.rays)
+
+        def result(k):
+            hits = pipes[k].trace(work.rays, work.packets)[0]
+            return hits.prim.tobytes() + hits.t.tobytes()
 
     def run(k):
         def go():
-            hits[k] = pipes[k].trace(work.rays, work.packets)[0]
+            results[k] = result(k)
         return timed(go)
 
     seconds, _ = run_rounds([lambda k=k: run(k) for k in range(len(configs))], rounds)
-    first = hits[0]
-    for (b, t), h in zip(configs, hits):
-        if not (np.array_equal(h.prim, first.prim)
-                and np.array_equal(h.t.view(np.uint32), first.t.view(np.uint32))):
-            sys.exit(f"spatial_splits={b} with {t}: hits differ from the first configuration's")
-    n = len(work.rays)
+    for (b, t), r in zip(configs, results):
+        if r != results[0]:
+            sys.exit(f"spatial_splits={b} with {t}: the {'image' if kind == 'frame' else 'hits'}"
+                     f" differ from the first configuration's")
     rows = []
     for k, (b, t) in enumerate(configs):
         base = configs.index((budgets[0], t))
         speeds = [n / r[k] / 1e6 for r in seconds]
-        rows.append({"budget": b, "traversal": t, "rays": n, "mrays_s": summary(speeds),
+        rows.append({"kind": kind, "budget": b, "traversal": t, "rays": n,
+                     "mrays_s": summary(speeds),
                      "vs_first_budget": summary(ratios(seconds, k, base))})
     return rows
 
@@ -105,6 +120,8 @@ def main(argv=None):
     ap.add_argument("--alpha", type=float, default=None,
                     help="split_alpha (default: the BVH default)")
     ap.add_argument("--traversals", type=_names, default=["wide8", "wide"])
+    ap.add_argument("--kinds", type=_names, default=["diffuse"],
+                    help="diffuse (first-bounce rays, Mrays/s), frame (Mpixels/s)")
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--build-rounds", type=int, default=3)
     ap.add_argument("--size", type=int, default=256)
@@ -119,27 +136,33 @@ def main(argv=None):
     for name in args.scenes:
         scene = load_scene(name)
         builds = measure_builds(scene, args.budgets, args.alpha, args.build_rounds)
-        traces = measure_traces(scene, args.budgets, args.alpha, args.traversals, args.rounds,
-                                args.size)
-        print(f"\n### {name} ({len(scene.faces)} triangles; {traces[0]['rays']} first-bounce "
-              f"diffuse rays)\n")
-        print("| spatial_splits | build s | references | SAH binary | SAH wide8 |" +
-              "".join(f" {t} Mrays/s | {t} vs {args.budgets[0]:g} |" for t in args.traversals))
-        print("|---|---|---|---|---|" + "---|---|" * len(args.traversals))
+        speeds = [row for kind in args.kinds
+                  for row in measure_speeds(scene, kind, args.budgets, args.alpha,
+                                            args.traversals, args.rounds, args.size)]
+        columns = [(kind, t) for kind in args.kinds for t in args.traversals]
+        print(f"\n### {name} ({len(scene.faces)} triangles; " + "; ".join(
+            f"{kind}: {next(r['rays'] for r in speeds if r['kind'] == kind)} "
+            f"{'pixels (4 spp)' if kind == 'frame' else 'first-bounce diffuse rays'}"
+            for kind in args.kinds) + ")\n")
+        print("| spatial_splits | build s | references | SAH binary | SAH wide8 |" + "".join(
+            f" {t} {kind} {'Mpixels/s' if kind == 'frame' else 'Mrays/s'} | vs "
+            f"{args.budgets[0]:g} |" for kind, t in columns))
+        print("|---|---|---|---|---|" + "---|---|" * len(columns))
         for b_row in builds:
             b = b_row["budget"]
             s = b_row["build_s"]
             cells = [f"{b:g}", f"{s['median']:.3f} [{s['min']:.3f}, {s['max']:.3f}]",
                      f"{b_row['references']} ({b_row['references'] / b_row['triangles']:.3f}x)",
                      f"{b_row['sah_binary']:.2f}", f"{b_row['sah_wide8']:.2f}"]
-            for t in args.traversals:
-                row = next(r for r in traces if r["budget"] == b and r["traversal"] == t)
+            for kind, t in columns:
+                row = next(r for r in speeds
+                           if r["kind"] == kind and r["budget"] == b and r["traversal"] == t)
                 m, v = row["mrays_s"], row["vs_first_budget"]
                 cells += [f"{m['median']:.3f} [{m['min']:.3f}, {m['max']:.3f}]",
                           f"{v['median']:.3f}x [{v['min']:.3f}, {v['max']:.3f}]"]
             print("| " + " | ".join(cells) + " |")
         sys.stdout.flush()
-        results.append({"scene": name, "builds": builds, "traces": traces})
+        results.append({"scene": name, "builds": builds, "speeds": speeds})
     if args.json:
         with open(args.json, "w", encoding="utf-8") as fh:
             json.dump({"machine": info, "isa": isa.active(), "load": load_average(),
