@@ -258,6 +258,19 @@ def test_adversarial_hits_match_brute_force_on_every_isa(each_isa, rng):
     assert_exact(bvh, V, F, batch(o, d), rng, f"{each_isa} rays in the split planes")
 
 
+@pytest.mark.parametrize("scale,offset", [(1e-3, 1e4), (1e4, -3e5), (1e-20, 1e-18)])
+def test_far_small_and_huge_meshes(rng, scale, offset):
+    """Needles and a scene-sized triangle moved far from the origin (float32 steps larger
+    than the cuts' rounding), shrunk or grown: every invariant and exact hits."""
+    for V, F in (needles(rng), big_triangle_scene(rng)):
+        V = (V.astype(np.float64) * scale + offset).astype(F32)
+        bvh = BVH(V, F, max_leaf=2, spatial_splits=2.0, split_alpha=0.0)
+        check_spatial_structure(bvh, V, F, 2.0)
+        assert bvh.references > len(F)
+        assert_exact(bvh, V, F, random_rays(rng, 1000, bvh.bounds, spread=1.2), rng,
+                     f"x {scale} + {offset}")
+
+
 def test_all_degenerate_mesh_is_never_hit(rng):
     V = np.array([[0, 0, 0], [1, 1, 1], [2, 2, 2], [0, 3, 0]], F32)
     F = np.array([[0, 1, 2], [1, 1, 1], [0, 0, 3], [3, 3, 0]] * 10, np.int32)
