@@ -242,7 +242,8 @@ class Pipeline:
         from other packages are always checked).
     bvh : dict, optional
         BVH build parameters (``preset``: ``"default"`` or ``"manta"`` for the paper's
-        big leaves; ``max_leaf``, ``bins``, ``traversal_cost``), see :class:`BVH`.
+        big leaves; ``max_leaf``, ``bins``, ``traversal_cost``; ``spatial_splits`` and
+        ``split_alpha`` for an SBVH), see :class:`BVH`.
     """
 
     def __init__(self, scene=None, *, generator="pinhole", sorter="nah", traversal="wide8",
