@@ -23,7 +23,8 @@ instead (``Pipeline.render``, 4 spp, lambert depth 2) and reports Mpixels/s.  Ea
 configuration once in an order rotated by one per round (interleaved, round 0 warms
 up and is dropped).  Reported: Mrays/s as the median over rounds with [min, max], and
 the medians [min, max] of the per-round speed ratios against the reference
-configurations (``--against``, default ``direct:embree``, ``embree`` and ``nah+wide8``).  Times are the
+configurations (``--against``, default ``direct:embree``, ``embree`` and
+``nah+wide8``).  Times are the
 measuring thread's CPU time (``--clock cpu``, default; robust to other load on the
 machine) or wall time (``--clock wall``).  The header names the CPU and the ISA.
 """
