@@ -18,7 +18,7 @@ sorter helps through the order (neighbouring rays share nodes and leaves,
 so streams stay large deeper in the tree).
 """
 from libc.stdint cimport int32_t, int64_t, uint8_t
-from raysort._types cimport rs_node4, rs_tri, rs_rays, rs_counters, rays_view
+from raysort._types cimport rs_node4, rs_node8, rs_tri, rs_tri8, rs_rays, rs_counters, rays_view
 
 from raysort import isa
 from raysort.sdk import ConfigError, Counters, PluginContractError, Traversal, integer
@@ -31,15 +31,32 @@ cdef extern from "raysort/stream.h" nogil:
         int32_t *ids
         int64_t *level_rays
         int depth
-    int rs_stream_alloc(rs_stream_scratch *w, int size, int depth)
+    int rs_stream_alloc(rs_stream_scratch *w, int size, int width, int depth)
     void rs_stream_free(rs_stream_scratch *w)
-    void rs_stream_trace(const rs_node4 *nodes, const rs_tri *tris, rs_rays *r, int n,
-                         int any_hit, int order, int min_stream, rs_stream_scratch *w,
-                         rs_counters *c)
+    void rs_stream_trace4(const rs_node4 *nodes, const rs_tri *tris, rs_rays *r, int n,
+                          int any_hit, int order, int min_stream, rs_stream_scratch *w,
+                          rs_counters *c)
+    void rs_stream_trace8(const rs_node8 *nodes, const rs_tri8 *groups, rs_rays *r, int n,
+                          int any_hit, int order, int min_stream, rs_stream_scratch *w,
+                          rs_counters *c)
+
+
+cdef void trace_stream(int width, const void *tree, const void *leaves, rs_rays *r, int n,
+                       int any_hit, int order, int min_stream, rs_stream_scratch *w,
+                       rs_counters *c) noexcept nogil:
+    """One stream through the 4-wide or the 8-wide tree."""
+    if width == 8:
+        rs_stream_trace8(<const rs_node8 *> tree, <const rs_tri8 *> leaves, r, n, any_hit, order,
+                         min_stream, w, c)
+    else:
+        rs_stream_trace4(<const rs_node4 *> tree, <const rs_tri *> leaves, r, n, any_hit, order,
+                         min_stream, w, c)
 
 
 #: the child orders ``order`` accepts, by name
 ORDERS = {"direction": RS_ORDER_DIRECTION, "votes": RS_ORDER_VOTES}
+#: the trees ``tree`` accepts: children per node
+TREES = (4, 8)
 #: most rays per stream (ids are int32 offsets into buffers of depth * size ids)
 MAX_STREAM = 1 << 20
 
@@ -49,7 +66,7 @@ def lanes():
     return RS_SW
 
 
-def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream):
+def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream, int width):
     """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa)."""
     cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
     cdef int capacity = packets.capacity, n_packets = starts.shape[0]
@@ -62,10 +79,15 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
                                       f"{capacity} lanes of the batch")
     if n_packets == 0 or len(bvh.triangles) == 0:
         return Counters()
-    cdef const uint8_t[::1] node_bytes = bvh.wide.view("u1").reshape(-1)
-    cdef const uint8_t[::1] tri_bytes = bvh.triangles.view("u1").reshape(-1)
-    cdef const rs_node4 *nodes = <const rs_node4 *> &node_bytes[0]
-    cdef const rs_tri *tris = <const rs_tri *> &tri_bytes[0]
+    if width == 8:
+        tree8 = bvh.wide8
+        node_array, leaf_array, depth = tree8.nodes, tree8.groups, tree8.depth
+    else:
+        node_array, leaf_array, depth = bvh.wide, bvh.triangles, bvh.wide_depth
+    cdef const uint8_t[::1] node_bytes = node_array.view("u1").reshape(-1)
+    cdef const uint8_t[::1] leaf_bytes = leaf_array.view("u1").reshape(-1)
+    cdef const void *tree = <const void *> &node_bytes[0]
+    cdef const void *leaves = <const void *> &leaf_bytes[0]
     cdef rs_rays rays = rays_view(packets.rows, packets.prim, packets.u, packets.v)
     cdef rs_counters c
     cdef rs_stream_scratch w
@@ -79,7 +101,7 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
     if active == 0:
         return Counters()
     size = <int> min(stream_size, active)
-    if not rs_stream_alloc(&w, size, bvh.wide_depth):
+    if not rs_stream_alloc(&w, size, width, depth):
         raise MemoryError()
     try:
         with nogil:
@@ -90,11 +112,11 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
                         w.ids[m] = i
                         m += 1
                         if m == size:
-                            rs_stream_trace(nodes, tris, &rays, m, any_hit, order, min_stream,
-                                            &w, &c)
+                            trace_stream(width, tree, leaves, &rays, m, any_hit, order,
+                                         min_stream, &w, &c)
                             m = 0
             if m:
-                rs_stream_trace(nodes, tris, &rays, m, any_hit, order, min_stream, &w, &c)
+                trace_stream(width, tree, leaves, &rays, m, any_hit, order, min_stream, &w, &c)
         levels = w.depth + 1
         while levels > 0 and w.level_rays[levels - 1] == 0:
             levels -= 1
@@ -141,13 +163,17 @@ class StreamTraversal(Traversal):
 
     trusted = True
 
-    def __init__(self, *, stream_size=16384, order="votes", min_stream=8):
+    def __init__(self, *, stream_size=16384, order="votes", min_stream=8, tree=8):
         self.stream_size = integer("stream_size", stream_size, 1, MAX_STREAM)
         if order not in ORDERS:
             raise ConfigError(f"order must be one of {', '.join(ORDERS)}; got {order!r}")
         self.order = order
         self.min_stream = integer("min_stream", min_stream, 0, MAX_STREAM)
+        self.tree = integer("tree", tree, min(TREES), max(TREES))
+        if self.tree not in TREES:
+            raise ConfigError(f"tree must be 4 or 8; got {tree!r}")
 
     def intersect(self, bvh, packets, any_hit=False):
         return isa.module("traversals.stream").trace(bvh, packets, any_hit, self.stream_size,
-                                                     ORDERS[self.order], self.min_stream)
+                                                     ORDERS[self.order], self.min_stream,
+                                                     self.tree)
