@@ -61,6 +61,7 @@ RS_INLINE rs_swi sw_gatheri(const int32_t *base, rs_swi id)
 { return _mm512_i32gather_epi32(id, base, 4); }
 RS_INLINE rs_swf sw_set1(float a) { return _mm512_set1_ps(a); }
 RS_INLINE rs_swi sw_set1i(int32_t a) { return _mm512_set1_epi32(a); }
+RS_INLINE int sw_eqi_bits(rs_swi a, rs_swi b) { return (int)_mm512_cmpeq_epi32_mask(a, b); }
 RS_INLINE rs_swf sw_add(rs_swf a, rs_swf b) { return _mm512_add_ps(a, b); }
 RS_INLINE rs_swf sw_sub(rs_swf a, rs_swf b) { return _mm512_sub_ps(a, b); }
 RS_INLINE rs_swf sw_mul(rs_swf a, rs_swf b) { return _mm512_mul_ps(a, b); }
@@ -100,6 +101,8 @@ RS_INLINE rs_swi sw_gatheri(const int32_t *base, rs_swi id)
 { return _mm256_i32gather_epi32((const int *)base, id, 4); }
 RS_INLINE rs_swf sw_set1(float a) { return _mm256_set1_ps(a); }
 RS_INLINE rs_swi sw_set1i(int32_t a) { return _mm256_set1_epi32(a); }
+RS_INLINE int sw_eqi_bits(rs_swi a, rs_swi b)
+{ return _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(a, b))); }
 RS_INLINE rs_swf sw_add(rs_swf a, rs_swf b) { return _mm256_add_ps(a, b); }
 RS_INLINE rs_swf sw_sub(rs_swf a, rs_swf b) { return _mm256_sub_ps(a, b); }
 RS_INLINE rs_swf sw_mul(rs_swf a, rs_swf b) { return _mm256_mul_ps(a, b); }
@@ -147,6 +150,8 @@ RS_INLINE rs_swi sw_ids(const int32_t *p) { rs_swi r; memcpy(r.i, p, sizeof r.i)
 RS_INLINE rs_swi sw_gatheri(const int32_t *base, rs_swi id)
 { rs_swi r; for (int k = 0; k < RS_SW; ++k) r.i[k] = base[id.i[k]]; return r; }
 RS_INLINE rs_swi sw_set1i(int32_t a) { rs_swi r; for (int k = 0; k < RS_SW; ++k) r.i[k] = a; return r; }
+RS_INLINE int sw_eqi_bits(rs_swi a, rs_swi b)
+{ int bits = 0; for (int k = 0; k < RS_SW; ++k) bits |= (a.i[k] == b.i[k]) << k; return bits; }
 RS_INLINE void sw_storei(int32_t *p, rs_swi a) { memcpy(p, a.i, sizeof a.i); }
 #  if RS_SSE
 RS_INLINE rs_swf sw_gather(const float *base, rs_swi id)
@@ -336,13 +341,12 @@ RS_INLINE void rs_stream_filter(const rs_rays *r, int width, const float *lo, co
                                 const int32_t *ids, int n, int32_t *const *sub, int *cnt,
                                 int *votes, int negative[3])
 {
-    int live[RS_STREAM_MAX_WIDTH], m = 0;
+    int live[RS_STREAM_MAX_WIDTH], m = 0, down[3] = {0, 0, 0};
     for (int k = 0; k < width; ++k) {
         cnt[k] = votes[k] = 0;
         if (lo[k] <= hi[k])                 /* an empty slot has lo > hi */
             live[m++] = k;
     }
-    negative[0] = negative[1] = negative[2] = 0;
     const rs_swf slack = sw_set1(RS_BOX_SLACK), inf = sw_set1(INFINITY);
     for (int g = 0; g < n; g += RS_SW) {
         int valid;
@@ -353,10 +357,10 @@ RS_INLINE void rs_stream_filter(const rs_rays *r, int width, const float *lo, co
             o[a] = sw_gather(r->o[a], id);
             inv[a] = sw_gather(r->inv[a], id);
             neg[a] = sw_sign(inv[a]);
-            negative[a] += rs_popcount(sw_bits(neg[a]) & valid);
+            down[a] += rs_popcount(sw_bits(neg[a]) & valid);
         }
         rs_swf tmin = sw_gather(r->tmin, id), t = sw_gather(r->t, id), best = inf;
-        int nearest[RS_STREAM_MAX_WIDTH];
+        rs_swi nearest = sw_set1i(-1);      /* per lane: j of the nearest live child hit */
         for (int j = 0; j < m; ++j) {
             int k = live[j];
             rs_swf tn = tmin, tf = t;
@@ -369,15 +373,15 @@ RS_INLINE void rs_stream_filter(const rs_rays *r, int width, const float *lo, co
             rs_swm hit = sw_and(sw_le(tn, sw_mul(tf, slack)), sw_from_bits(valid));
             int bits = sw_bits(hit);
             sw_append(sub[k], &cnt[k], id, bits);
-            int closer = sw_bits(sw_and(hit, sw_lt(tn, best)));
-            best = sw_blend(sw_from_bits(closer), tn, best);
-            for (int i = 0; i < j; ++i)
-                nearest[i] &= ~closer;
-            nearest[j] = closer;
+            rs_swm closer = sw_and(hit, sw_lt(tn, best));
+            best = sw_blend(closer, tn, best);
+            nearest = sw_blendi(closer, sw_set1i(j), nearest);
         }
         for (int j = 0; j < m; ++j)
-            votes[live[j]] += rs_popcount(nearest[j]);
+            votes[live[j]] += rs_popcount(sw_eqi_bits(nearest, sw_set1i(j)));
     }
+    for (int a = 0; a < 3; ++a)
+        negative[a] = down[a];
 }
 
 /* Order the children with a non-empty sub-stream, the one to visit first first;
