@@ -1,14 +1,17 @@
 """``stream``: dynamic ray stream traversal (Barringer and Akenine-Moller, SIGGRAPH 2014).
 
-Beyond the paper: instead of one ray (``wide``) or one packet (``ranged``) at
-a time, a large stream of ray ids descends the 4-wide BVH together.  At each
-node the stream is split into one sub-stream per child, the rays whose slab
-test hits that child, with SIMD tests over rays (16, 8 or 4 lanes on AVX-512,
-AVX2 and SSE2; one on the scalar build); the sub-streams wait on a task
-stack, and leaves test their stream against their triangles, again SIMD over
-rays.  A node's box data is loaded once for the whole stream, and the lanes
-are always full whatever the rays' directions, which is what the paper gains
-on incoherent rays.  The kernel is ``raysort/include/raysort/stream.h``.
+Beyond the paper: instead of one ray (``wide8``, ``wide``) or one packet
+(``ranged``) at a time, a large stream of ray ids descends the 8-wide BVH
+(``BVH.wide8``; ``tree=4``: the 4-wide ``BVH.wide``) together.  At each node
+the stream is split into one sub-stream per child, the rays whose slab test
+hits that child, with SIMD tests over rays (16, 8 or 4 lanes on AVX-512, AVX2
+and SSE2; one on the scalar build); the sub-streams wait on a task stack, and
+leaves test their stream against each of their triangles, again SIMD over
+rays.  Small streams finish one ray at a time with the single-ray kernels of
+the same tree (``wide8``'s or ``wide``'s).  A node's box data is loaded once
+for the whole stream, and the lanes are always full whatever the rays'
+directions, which is what the paper gains on incoherent rays.  The kernel is
+``raysort/include/raysort/stream.h``.
 
 The stream is the whole traversal call, not one sub-packet: every active ray
 of every sub-packet passed to ``intersect`` (the pipeline passes a whole
@@ -129,22 +132,25 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
 
 
 class StreamTraversal(Traversal):
-    """A stream of rays through the 4-wide BVH together (Barringer & Akenine-Moller 2014).
+    """A stream of rays through the wide BVH together (Barringer & Akenine-Moller 2014).
 
     Every active ray of the call, in the sorter's order, is cut into streams
-    of ``stream_size`` rays; each stream descends ``BVH.wide`` as a task stack
-    of (node, sub-stream) pairs, filtered at each node by SIMD slab tests over
-    rays (16/8/4/1 lanes on AVX-512/AVX2/SSE2/scalar) and tested at leaves
-    SIMD over rays.  Children are visited in an order chosen per stream;
-    streams smaller than ``min_stream`` finish one ray at a time as ``wide``
-    does.  Exact: each lane performs the scalar kernels' operations.
+    of ``stream_size`` rays; each stream descends ``BVH.wide8`` (or
+    ``BVH.wide``) as a task stack of (node, sub-stream) pairs, filtered at
+    each node by SIMD slab tests over rays (16/8/4/1 lanes on
+    AVX-512/AVX2/SSE2/scalar) and tested at leaves SIMD over rays, one
+    triangle at a time.  Children are visited in an order chosen per stream;
+    streams smaller than ``min_stream`` finish one ray at a time as ``wide8``
+    (``wide``) does.  Exact: each lane performs the scalar kernels' operations.
 
     Counters (the same on every ISA): SIMD N_B is one per ray and node it
-    visits (four child boxes, as ``wide``), SIMD N_T one per triangle and 4
-    rays (rounded up) of a leaf's stream; the single-ray finish counts as
-    ``wide``.  ``stream_tasks`` / ``stream_rays`` give the mean stream size;
-    ``stream_level_rays[d]`` counts the rays of the streams popped at depth ``d``
-    of the 4-wide tree (0: the root; a leaf is one level below its node).
+    visits (the node's eight or four child boxes, as ``wide8`` / ``wide``);
+    SIMD N_T at a leaf of the 8-wide tree one per ray and group of up to
+    eight triangles (as ``wide8``), of the 4-wide tree one per triangle and 4
+    rays (rounded up); the single-ray finish counts as ``wide8`` / ``wide``.
+    ``stream_tasks`` / ``stream_rays`` give the mean stream size;
+    ``stream_level_rays[d]`` counts the rays of the streams popped at depth
+    ``d`` of the tree (0: the root; a leaf is one level below its node).
 
     ===========  ======  ==========  ========================================
     parameter    type    default     meaning
@@ -158,6 +164,10 @@ class StreamTraversal(Traversal):
                                      octant first)
     min_stream   int     8           streams of fewer rays finish one ray
                                      at a time from their node (0: never)
+    tree         int     8           8: the 8-wide BVH (``BVH.wide8``,
+                                     leaves of rs_tri8 groups); 4: the
+                                     4-wide one (``BVH.wide``), slower on
+                                     every scene measured (BENCHMARKS.md §7)
     ===========  ======  ==========  ========================================
     """
 

@@ -494,14 +494,11 @@ RS_INLINE void rs_stream_tri(rs_stream_lanes *s, const float *v0, const float *e
     ok = sw_and(ok, sw_gt(t, s->tmin));
     ok = sw_and(ok, sw_or(sw_lt(t, s->best), sw_and(sw_eq(t, s->best), sw_lti(tid, s->prim))));
     ok = sw_and(ok, s->valid);
-    int bits = sw_bits(ok);
-    if (bits) {
-        s->best = sw_blend(ok, any_hit ? sw_set1(-INFINITY) : t, s->best);
-        s->prim = sw_blendi(ok, tid, s->prim);
-        s->u = sw_blend(ok, u, s->u);
-        s->v = sw_blend(ok, v, s->v);
-        s->changed |= bits;
-    }
+    s->best = sw_blend(ok, any_hit ? sw_set1(-INFINITY) : t, s->best);
+    s->prim = sw_blendi(ok, tid, s->prim);
+    s->u = sw_blend(ok, u, s->u);
+    s->v = sw_blend(ok, v, s->v);
+    s->changed |= sw_bits(ok);
 }
 
 /* Test the rays ids[0, n) against triangles tris[0, count) (the 4-wide tree's
