@@ -24,7 +24,7 @@ SETTINGS = [dict(stream_size=s, min_stream=m, order=o, tree=tree)
                             (1000, 4, "direction"), (16384, 0, "votes"),
                             (16384, 8, "direction"), (16384, 1 << 20, "votes")]
             for tree in (4, 8)]
-#: the single-ray traversal each tree's small streams finish with, and the tree's depth
+#: the single-ray traversal each tree's small streams finish with
 SINGLE = {4: "wide", 8: "wide8"}
 
 
