@@ -1,15 +1,18 @@
 /* raysort: the ray-stream traversal kernel (Barringer & Akenine-Moller 2014).
  *
- * A stream of ray ids (lanes of a gathered rs_rays batch) descends the 4-wide
- * BVH (rs_node4) together.  At each node the stream is filtered into one
- * sub-stream per child: the ids of the rays whose slab test hits that child's
- * box, RS_SW rays per SIMD test (16 on AVX-512, 8 on AVX2, 4 on SSE2, 1 on the
- * scalar build).  The sub-streams go on a task stack, nearest child (by the
- * stream's majority) on top.  A leaf tests the rays of its stream against its
- * triangles, RS_SW rays at a time.  Streams smaller than a threshold finish
- * one ray at a time from their node, as bepu's RayBatcher does.
+ * A stream of ray ids (lanes of a gathered rs_rays batch) descends a wide BVH
+ * together: the 8-wide one (rs_node8 nodes, rs_tri8 leaf groups: BVH.wide8)
+ * or the 4-wide one (rs_node4, rs_tri: BVH.wide).  At each node the stream is
+ * filtered into one sub-stream per child: the ids of the rays whose slab test
+ * hits that child's box, RS_SW rays per SIMD test (16 on AVX-512, 8 on AVX2,
+ * 4 on SSE2, 1 on the scalar build).  The sub-streams go on a task stack, the
+ * child the stream prefers on top.  A leaf tests the rays of its stream
+ * against each of its triangles, RS_SW rays at a time.  Streams smaller than a
+ * threshold finish one ray at a time from their node with the tree's
+ * single-ray kernels (wide8.h's, or simd.h's 4-wide ones), as bepu's
+ * RayBatcher does.
  *
- * Exactness: each lane performs rs_node4_hit's slab arithmetic on one child box
+ * Exactness: each lane performs rs_box1's slab arithmetic on one child box
  * and rs_tri1's Moller-Trumbore arithmetic on one triangle, in the same order
  * (simd.h; -ffp-contract=off), and a box test uses the ray's current t, which
  * only ever shrinks to a hit brute force accepts.  So a ray meets every box
