@@ -166,8 +166,9 @@ class StreamTraversal(Traversal):
                                      at a time from their node (0: never)
     tree         int     8           8: the 8-wide BVH (``BVH.wide8``,
                                      leaves of rs_tri8 groups); 4: the
-                                     4-wide one (``BVH.wide``), slower on
-                                     every scene measured (BENCHMARKS.md §7)
+                                     4-wide one (``BVH.wide``), slower with
+                                     every SIMD ISA on every scene measured
+                                     (BENCHMARKS.md §7)
     ===========  ======  ==========  ========================================
     """
 
