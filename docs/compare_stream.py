@@ -1,11 +1,12 @@
-"""The ``stream`` traversal against single-ray ``wide`` and Embree, through Pipeline.trace.
+"""The ``stream`` traversal against single-ray ``wide8`` / ``wide`` and Embree (Pipeline.trace).
 
 Usage (from any directory, with raysort installed; Embree rows need
 ``pip install ./plugins/raysort-embree``)::
 
     python docs/compare_stream.py                          # Sibenik, Sponza, forest
     python docs/compare_stream.py --scenes sibenik --rounds 9 --size 256
-    python docs/compare_stream.py --configs stream+nah wide+nah embree+none
+    python docs/compare_stream.py --configs stream+nah wide8+nah embree+none
+    python docs/compare_stream.py --configs stream+nah stream:tree=4+nah wide8+nah
 
 Workload: the first-bounce diffuse rays of a render (``workload(scene,
 "diffuse:depth=1")``, ``--size`` squared pixels at 1 spp, in the tile-sized large
@@ -19,7 +20,8 @@ rotated by one per round; round 0 warms up and is not kept.  Per configuration:
 the median over rounds (with [min, max]) of the traverse stage and of sort +
 gather + traverse (the pipeline's own stage clock, wall time), and the median of
 the per-round ratios against the reference configurations (``--versus``); the
-best ``wide`` configuration is the one with the lowest median traverse time.
+best single-ray wide configuration (``wide8`` or ``wide``) is the one with the lowest
+median traverse time.
 Counters per ray (box and triangle tests, mean stream size) come from one round.
 """
 from __future__ import annotations
@@ -92,7 +94,7 @@ def median_ratio(num, den):
 
 def report(scene_name, n_rays, n_chunks, times, counters, versus, out=sys.stdout):
     configs = list(times)
-    wide = [c for c in configs if parse_config(c)[0].split(":")[0] == "wide"]
+    wide = [c for c in configs if parse_config(c)[0].split(":")[0] in ("wide", "wide8")]
     best_wide = min(wide, key=lambda c: statistics.median(times[c]["traverse"])) if wide else None
     refs = [v for v in versus if v in times] + ([f"best wide ({best_wide})"] if best_wide else [])
     ref_times = {v: times[v]["traverse"] for v in versus if v in times}
@@ -126,14 +128,14 @@ def report(scene_name, n_rays, n_chunks, times, counters, versus, out=sys.stdout
 
 DEFAULT_CONFIGS = (["stream+" + s for s in ("none", "nah", "origin_direction", "two_point",
                                             "termination", "garanzha")]
-                   + ["wide+none", "wide+nah", "embree+none"])
+                   + ["wide8+none", "wide8+nah", "embree+none"])
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--scenes", nargs="+", default=["sibenik", "sponza", "forest"])
     ap.add_argument("--configs", nargs="+", default=DEFAULT_CONFIGS)
-    ap.add_argument("--versus", nargs="+", default=["wide+nah", "embree+none"])
+    ap.add_argument("--versus", nargs="+", default=["wide8+nah", "embree+none"])
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--size", type=int, default=256, help="image width and height (pixels)")
     ap.add_argument("--batch", type=int, default=16384, help="rays per Pipeline.trace call")

@@ -1,14 +1,17 @@
 """``stream``: dynamic ray stream traversal (Barringer and Akenine-Moller, SIGGRAPH 2014).
 
-Beyond the paper: instead of one ray (``wide``) or one packet (``ranged``) at
-a time, a large stream of ray ids descends the 4-wide BVH together.  At each
-node the stream is split into one sub-stream per child, the rays whose slab
-test hits that child, with SIMD tests over rays (16, 8 or 4 lanes on AVX-512,
-AVX2 and SSE2; one on the scalar build); the sub-streams wait on a task
-stack, and leaves test their stream against their triangles, again SIMD over
-rays.  A node's box data is loaded once for the whole stream, and the lanes
-are always full whatever the rays' directions, which is what the paper gains
-on incoherent rays.  The kernel is ``raysort/include/raysort/stream.h``.
+Beyond the paper: instead of one ray (``wide8``, ``wide``) or one packet
+(``ranged``) at a time, a large stream of ray ids descends the 8-wide BVH
+(``BVH.wide8``; ``tree=4``: the 4-wide ``BVH.wide``) together.  At each node
+the stream is split into one sub-stream per child, the rays whose slab test
+hits that child, with SIMD tests over rays (16, 8 or 4 lanes on AVX-512, AVX2
+and SSE2; one on the scalar build); the sub-streams wait on a task stack, and
+leaves test their stream against each of their triangles, again SIMD over
+rays.  Small streams finish one ray at a time with the single-ray kernels of
+the same tree (``wide8``'s or ``wide``'s).  A node's box data is loaded once
+for the whole stream, and the lanes are always full whatever the rays'
+directions, which is what the paper gains on incoherent rays.  The kernel is
+``raysort/include/raysort/stream.h``.
 
 The stream is the whole traversal call, not one sub-packet: every active ray
 of every sub-packet passed to ``intersect`` (the pipeline passes a whole
@@ -18,7 +21,7 @@ sorter helps through the order (neighbouring rays share nodes and leaves,
 so streams stay large deeper in the tree).
 """
 from libc.stdint cimport int32_t, int64_t, uint8_t
-from raysort._types cimport rs_node4, rs_tri, rs_rays, rs_counters, rays_view
+from raysort._types cimport rs_node4, rs_node8, rs_tri, rs_tri8, rs_rays, rs_counters, rays_view
 
 from raysort import isa
 from raysort.sdk import ConfigError, Counters, PluginContractError, Traversal, integer
@@ -31,15 +34,32 @@ cdef extern from "raysort/stream.h" nogil:
         int32_t *ids
         int64_t *level_rays
         int depth
-    int rs_stream_alloc(rs_stream_scratch *w, int size, int depth)
+    int rs_stream_alloc(rs_stream_scratch *w, int size, int width, int depth)
     void rs_stream_free(rs_stream_scratch *w)
-    void rs_stream_trace(const rs_node4 *nodes, const rs_tri *tris, rs_rays *r, int n,
-                         int any_hit, int order, int min_stream, rs_stream_scratch *w,
-                         rs_counters *c)
+    void rs_stream_trace4(const rs_node4 *nodes, const rs_tri *tris, rs_rays *r, int n,
+                          int any_hit, int order, int min_stream, rs_stream_scratch *w,
+                          rs_counters *c)
+    void rs_stream_trace8(const rs_node8 *nodes, const rs_tri8 *groups, rs_rays *r, int n,
+                          int any_hit, int order, int min_stream, rs_stream_scratch *w,
+                          rs_counters *c)
+
+
+cdef void trace_stream(int width, const void *tree, const void *leaves, rs_rays *r, int n,
+                       int any_hit, int order, int min_stream, rs_stream_scratch *w,
+                       rs_counters *c) noexcept nogil:
+    """One stream through the 4-wide or the 8-wide tree."""
+    if width == 8:
+        rs_stream_trace8(<const rs_node8 *> tree, <const rs_tri8 *> leaves, r, n, any_hit, order,
+                         min_stream, w, c)
+    else:
+        rs_stream_trace4(<const rs_node4 *> tree, <const rs_tri *> leaves, r, n, any_hit, order,
+                         min_stream, w, c)
 
 
 #: the child orders ``order`` accepts, by name
 ORDERS = {"direction": RS_ORDER_DIRECTION, "votes": RS_ORDER_VOTES}
+#: the trees ``tree`` accepts: children per node
+TREES = (4, 8)
 #: most rays per stream (ids are int32 offsets into buffers of depth * size ids)
 MAX_STREAM = 1 << 20
 
@@ -49,7 +69,7 @@ def lanes():
     return RS_SW
 
 
-def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream):
+def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream, int width):
     """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa)."""
     cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
     cdef int capacity = packets.capacity, n_packets = starts.shape[0]
@@ -62,10 +82,15 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
                                       f"{capacity} lanes of the batch")
     if n_packets == 0 or len(bvh.triangles) == 0:
         return Counters()
-    cdef const uint8_t[::1] node_bytes = bvh.wide.view("u1").reshape(-1)
-    cdef const uint8_t[::1] tri_bytes = bvh.triangles.view("u1").reshape(-1)
-    cdef const rs_node4 *nodes = <const rs_node4 *> &node_bytes[0]
-    cdef const rs_tri *tris = <const rs_tri *> &tri_bytes[0]
+    if width == 8:
+        tree8 = bvh.wide8
+        node_array, leaf_array, depth = tree8.nodes, tree8.groups, tree8.depth
+    else:
+        node_array, leaf_array, depth = bvh.wide, bvh.triangles, bvh.wide_depth
+    cdef const uint8_t[::1] node_bytes = node_array.view("u1").reshape(-1)
+    cdef const uint8_t[::1] leaf_bytes = leaf_array.view("u1").reshape(-1)
+    cdef const void *tree = <const void *> &node_bytes[0]
+    cdef const void *leaves = <const void *> &leaf_bytes[0]
     cdef rs_rays rays = rays_view(packets.rows, packets.prim, packets.u, packets.v)
     cdef rs_counters c
     cdef rs_stream_scratch w
@@ -79,7 +104,7 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
     if active == 0:
         return Counters()
     size = <int> min(stream_size, active)
-    if not rs_stream_alloc(&w, size, bvh.wide_depth):
+    if not rs_stream_alloc(&w, size, width, depth):
         raise MemoryError()
     try:
         with nogil:
@@ -90,11 +115,11 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
                         w.ids[m] = i
                         m += 1
                         if m == size:
-                            rs_stream_trace(nodes, tris, &rays, m, any_hit, order, min_stream,
-                                            &w, &c)
+                            trace_stream(width, tree, leaves, &rays, m, any_hit, order,
+                                         min_stream, &w, &c)
                             m = 0
             if m:
-                rs_stream_trace(nodes, tris, &rays, m, any_hit, order, min_stream, &w, &c)
+                trace_stream(width, tree, leaves, &rays, m, any_hit, order, min_stream, &w, &c)
         levels = w.depth + 1
         while levels > 0 and w.level_rays[levels - 1] == 0:
             levels -= 1
@@ -107,22 +132,25 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
 
 
 class StreamTraversal(Traversal):
-    """A stream of rays through the 4-wide BVH together (Barringer & Akenine-Moller 2014).
+    """A stream of rays through the wide BVH together (Barringer & Akenine-Moller 2014).
 
     Every active ray of the call, in the sorter's order, is cut into streams
-    of ``stream_size`` rays; each stream descends ``BVH.wide`` as a task stack
-    of (node, sub-stream) pairs, filtered at each node by SIMD slab tests over
-    rays (16/8/4/1 lanes on AVX-512/AVX2/SSE2/scalar) and tested at leaves
-    SIMD over rays.  Children are visited in an order chosen per stream;
-    streams smaller than ``min_stream`` finish one ray at a time as ``wide``
-    does.  Exact: each lane performs the scalar kernels' operations.
+    of ``stream_size`` rays; each stream descends ``BVH.wide8`` (or
+    ``BVH.wide``) as a task stack of (node, sub-stream) pairs, filtered at
+    each node by SIMD slab tests over rays (16/8/4/1 lanes on
+    AVX-512/AVX2/SSE2/scalar) and tested at leaves SIMD over rays, one
+    triangle at a time.  Children are visited in an order chosen per stream;
+    streams smaller than ``min_stream`` finish one ray at a time as ``wide8``
+    (``wide``) does.  Exact: each lane performs the scalar kernels' operations.
 
     Counters (the same on every ISA): SIMD N_B is one per ray and node it
-    visits (four child boxes, as ``wide``), SIMD N_T one per triangle and 4
-    rays (rounded up) of a leaf's stream; the single-ray finish counts as
-    ``wide``.  ``stream_tasks`` / ``stream_rays`` give the mean stream size;
-    ``stream_level_rays[d]`` counts the rays of the streams popped at depth ``d``
-    of the 4-wide tree (0: the root; a leaf is one level below its node).
+    visits (the node's eight or four child boxes, as ``wide8`` / ``wide``);
+    SIMD N_T at a leaf of the 8-wide tree one per ray and group of up to
+    eight triangles (as ``wide8``), of the 4-wide tree one per triangle and 4
+    rays (rounded up); the single-ray finish counts as ``wide8`` / ``wide``.
+    ``stream_tasks`` / ``stream_rays`` give the mean stream size;
+    ``stream_level_rays[d]`` counts the rays of the streams popped at depth
+    ``d`` of the tree (0: the root; a leaf is one level below its node).
 
     ===========  ======  ==========  ========================================
     parameter    type    default     meaning
@@ -136,18 +164,27 @@ class StreamTraversal(Traversal):
                                      octant first)
     min_stream   int     8           streams of fewer rays finish one ray
                                      at a time from their node (0: never)
+    tree         int     8           8: the 8-wide BVH (``BVH.wide8``,
+                                     leaves of rs_tri8 groups); 4: the
+                                     4-wide one (``BVH.wide``), slower with
+                                     every SIMD ISA on every scene measured
+                                     (BENCHMARKS.md §7)
     ===========  ======  ==========  ========================================
     """
 
     trusted = True
 
-    def __init__(self, *, stream_size=16384, order="votes", min_stream=8):
+    def __init__(self, *, stream_size=16384, order="votes", min_stream=8, tree=8):
         self.stream_size = integer("stream_size", stream_size, 1, MAX_STREAM)
         if order not in ORDERS:
             raise ConfigError(f"order must be one of {', '.join(ORDERS)}; got {order!r}")
         self.order = order
         self.min_stream = integer("min_stream", min_stream, 0, MAX_STREAM)
+        self.tree = integer("tree", tree, min(TREES), max(TREES))
+        if self.tree not in TREES:
+            raise ConfigError(f"tree must be 4 or 8; got {tree!r}")
 
     def intersect(self, bvh, packets, any_hit=False):
         return isa.module("traversals.stream").trace(bvh, packets, any_hit, self.stream_size,
-                                                     ORDERS[self.order], self.min_stream)
+                                                     ORDERS[self.order], self.min_stream,
+                                                     self.tree)

@@ -1,5 +1,6 @@
-"""The ``stream`` traversal: brute force's hits for every stream size, child order, small-stream
-threshold and ISA; its counters against the single-ray ``wide`` traversal it falls back to.
+"""The ``stream`` traversal: brute force's hits for both trees, every stream size, child order,
+small-stream threshold and ISA; its counters against the single-ray traversal it falls back to
+(``wide`` on the 4-wide tree, ``wide8`` on the 8-wide one).
 
 The conformance suite (test_conformance.py) runs ``stream`` with its defaults; here the
 parameters are pushed to their ends: streams of one ray, streams that never fall back to
@@ -18,10 +19,13 @@ from raysort.stats import Counters
 from _helpers import assert_same_hits, random_rays
 
 F32 = np.float32
-SETTINGS = [dict(stream_size=s, min_stream=m, order=o)
+SETTINGS = [dict(stream_size=s, min_stream=m, order=o, tree=tree)
             for s, m, o in [(1, 0, "votes"), (3, 0, "direction"), (64, 0, "votes"),
                             (1000, 4, "direction"), (16384, 0, "votes"),
-                            (16384, 8, "direction"), (16384, 1 << 20, "votes")]]
+                            (16384, 8, "direction"), (16384, 1 << 20, "votes")]
+            for tree in (4, 8)]
+#: the single-ray traversal each tree's small streams finish with
+SINGLE = {4: "wide", 8: "wide8"}
 
 
 @pytest.fixture(params=isa.ISAS)
@@ -108,7 +112,7 @@ def test_soup_matches_brute_force(each_isa, soup, params):
     assert counters.rays == len(rays)
 
 
-@pytest.mark.parametrize("params", SETTINGS[:3] + SETTINGS[-3:],
+@pytest.mark.parametrize("params", SETTINGS[:6] + SETTINGS[-6:],
                          ids=lambda p: "-".join(map(str, p.values())))
 def test_ties_degenerates_and_grazing_rays(each_isa, ties, params):
     """Rays through shared vertices and edges and duplicated faces tie at equal t: the lower
@@ -125,7 +129,8 @@ def test_sibenik_diffuse(each_isa, workloads, sibenik):
     ref = brute_force(sibenik.vertices, sibenik.faces, rays)
     order, offsets = raysort.create("sorters", "nah").sort(
         rays, np.array([0, len(rays)], np.int32), sibenik.bvh().bounds)
-    for params in (dict(), dict(min_stream=0, order="direction", stream_size=500)):
+    for params in (dict(), dict(tree=4), dict(min_stream=0, order="direction", stream_size=500),
+                   dict(tree=4, min_stream=0, order="direction", stream_size=500)):
         hits, _ = trace(sibenik.bvh(), rays, order, offsets, **params)
         assert_same_hits(hits, ref, f"{each_isa} sibenik {params}")
 
@@ -135,27 +140,30 @@ def test_lanes_follow_the_isa(each_isa):
     assert isa.module("traversals.stream").lanes() == expected
 
 
-def test_counters_are_the_same_on_every_isa(soup):
+@pytest.mark.parametrize("tree", [4, 8])
+def test_counters_are_the_same_on_every_isa(soup, tree):
     V, F, bvh, rays, _ = soup
     seen = {}
     for name in isa.available():
         previous = isa.use(name)
         try:
-            seen[name] = trace(bvh, rays, min_stream=4, stream_size=700)[1].as_dict()
+            seen[name] = trace(bvh, rays, min_stream=4, stream_size=700, tree=tree)[1].as_dict()
         finally:
             isa.use(previous)
     assert all(c == seen[isa.baseline()] for c in seen.values()), seen
 
 
-def test_single_ray_finish_counts_as_wide(soup):
+@pytest.mark.parametrize("tree", [4, 8])
+def test_single_ray_finish_counts_as_wide(soup, tree):
     """With a threshold above the stream size every ray walks alone from the root: the
-    counters (and hits) are exactly those of ``wide``."""
+    counters (and hits) are exactly those of ``wide`` (4-wide tree) or ``wide8``."""
     V, F, bvh, rays, ref = soup
-    hits, c = trace(bvh, rays, min_stream=1 << 20)
+    hits, c = trace(bvh, rays, min_stream=1 << 20, tree=tree)
     packets = gather(rays, np.arange(len(rays), dtype=np.int32),
                      np.array([0, len(rays)], np.int32))
-    w = raysort.create("traversals", "wide").intersect(bvh, packets)
-    assert (c.box4, c.tri1, c.tri4, c.box1, c.ia) == (w.box4, w.tri1, 0, 0, 0)
+    w = raysort.create("traversals", SINGLE[tree]).intersect(bvh, packets)
+    assert (c.box4, c.tri1, c.tri4, c.box1, c.ia) == (w.box4, w.tri1, w.tri4, 0, 0)
+    assert c.box4 > 0 and c.tri1 + c.tri4 > 0
     assert c.stream_tasks == c.stream_rays == 0
 
 
@@ -164,26 +172,30 @@ def test_stream_counters(soup):
     ray of an inner node's stream is one SIMD N_B, and leaf streams count SIMD N_T."""
     V, F, bvh, rays, _ = soup
     n = len(rays)
-    _, one = trace(bvh, rays, min_stream=0)
-    assert one.rays == n and one.stream_rays >= n and one.stream_tasks >= 1
-    assert one.box4 >= n and one.tri4 > 0 and one.tri1 == one.box1 == one.ia == 0
-    assert one.stream_rays > one.box4               # leaf streams hold rays too
-    _, split = trace(bvh, rays, min_stream=0, stream_size=n // 3 + 1)
-    assert split.stream_tasks > one.stream_tasks    # three root streams, each split again
-    _, mixed = trace(bvh, rays, min_stream=16)
-    assert mixed.tri1 > 0 and mixed.stream_tasks < one.stream_tasks
+    for tree in (4, 8):
+        _, one = trace(bvh, rays, min_stream=0, tree=tree)
+        assert one.rays == n and one.stream_rays >= n and one.stream_tasks >= 1
+        assert one.box4 >= n and one.tri4 > 0 and one.tri1 == one.box1 == one.ia == 0
+        assert one.stream_rays > one.box4               # leaf streams hold rays too
+        _, split = trace(bvh, rays, min_stream=0, stream_size=n // 3 + 1, tree=tree)
+        assert split.stream_tasks > one.stream_tasks    # three root streams, each split again
+        _, mixed = trace(bvh, rays, min_stream=16, tree=tree)
+        assert mixed.stream_tasks < one.stream_tasks and mixed.stream_rays < one.stream_rays
+        assert (mixed.tri1 > 0) == (tree == 4)      # the 4-wide tree's finish tests triangles
+                                                    # one by one, the 8-wide one in groups
 
 
-def level_rays_by_python(bvh, packets):
-    """Rays that enter each level of ``bvh.wide`` when nothing is ever hit, by a walk in
-    NumPy: a box's rays are those of its parent that pass the slab test against it (float32,
-    the kernel's operations and its 2^-14 slack), the root's are all rays."""
+def level_rays_by_python(nodes, packets):
+    """Rays that enter each level of a wide tree (``bvh.wide`` or ``bvh.wide8.nodes``) when
+    nothing is ever hit, by a walk in NumPy: a box's rays are those of its parent that pass
+    the slab test against it (float32, the kernel's operations and its 2^-14 slack), the
+    root's are all rays."""
     rows = packets.rows
     o = [rows[int(PacketRow.ox) + a, :len(packets.index)] for a in range(3)]
     inv = [rows[int(PacketRow.ix) + a, :len(packets.index)] for a in range(3)]
     tmin, tmax = rows[int(PacketRow.tmin)], rows[int(PacketRow.t)]
     active = np.flatnonzero(tmin[:len(packets.index)] < tmax[:len(packets.index)])
-    nodes, slack = bvh.wide, F32(1 + 2.0 ** -14)
+    slack = F32(1 + 2.0 ** -14)
     levels = {}
 
     def visit(node, ids, level):
@@ -191,7 +203,7 @@ def level_rays_by_python(bvh, packets):
         if node < 0:
             return
         box = nodes[node]
-        for k in range(4):
+        for k in range(len(box["child"])):
             if not box["lo"][0][k] <= box["hi"][0][k]:        # an empty slot
                 continue
             tn, tf = tmin[ids], tmax[ids]
@@ -210,10 +222,11 @@ def level_rays_by_python(bvh, packets):
     return tuple(levels.get(d, 0) for d in range(max(levels) + 1))
 
 
-def test_level_rays_equal_an_independent_count(each_isa):
+@pytest.mark.parametrize("tree", [4, 8])
+def test_level_rays_equal_an_independent_count(each_isa, tree):
     """With triangles no ray can hit (zero area), which rays enter which box depends on the
-    boxes alone: the per-level stream sizes equal a walk of the 4-wide tree in NumPy, and
-    add up to stream_rays."""
+    boxes alone: the per-level stream sizes equal a walk of the tree in NumPy, and add up
+    to stream_rays."""
     rng = np.random.default_rng(17)
     m = 600
     v0 = rng.random((m, 3)) * 10
@@ -224,10 +237,10 @@ def test_level_rays_equal_an_independent_count(each_isa):
     rays = random_rays(rng, 1500, bvh.bounds)
     order = np.arange(len(rays), dtype=np.int32)
     packets = gather(rays, order, np.array([0, len(rays)], np.int32))
-    want = level_rays_by_python(bvh, packets)
-    hits, c = trace(bvh, rays, min_stream=0)
+    want = level_rays_by_python(bvh.wide8.nodes if tree == 8 else bvh.wide, packets)
+    hits, c = trace(bvh, rays, min_stream=0, tree=tree)
     assert (hits.prim == -1).all()
-    assert len(want) > 4 and want[0] == len(rays)
+    assert len(want) >= 3 and want[0] == len(rays)
     assert c.stream_level_rays == want
     assert sum(c.stream_level_rays) == c.stream_rays
 
@@ -237,12 +250,14 @@ def test_level_rays_add_up(soup):
     the single-ray finish and several streams), and Counters add them entry by entry."""
     V, F, bvh, rays, _ = soup
     n = len(rays)
+    depth = {4: bvh.wide_depth, 8: bvh.wide8.depth}
     for params in (dict(min_stream=0), dict(min_stream=16, stream_size=n // 3 + 1)):
-        _, c = trace(bvh, rays, **params)
-        assert c.stream_level_rays[0] == n
-        assert sum(c.stream_level_rays) == c.stream_rays
-        assert len(c.stream_level_rays) <= bvh.wide_depth + 1
-        assert c.as_dict()["stream_level_rays"] == list(c.stream_level_rays)
+        for tree in (4, 8):
+            _, c = trace(bvh, rays, tree=tree, **params)
+            assert c.stream_level_rays[0] == n
+            assert sum(c.stream_level_rays) == c.stream_rays
+            assert len(c.stream_level_rays) <= depth[tree] + 1
+            assert c.as_dict()["stream_level_rays"] == list(c.stream_level_rays)
     _, w = trace(bvh, rays, min_stream=1 << 20)          # every ray alone: no streams
     assert w.stream_level_rays == ()
     a, b = Counters(), Counters()
@@ -258,6 +273,9 @@ def test_parameters_are_checked():
         raysort.create("traversals", {"type": "stream", "stream_size": 0})
     with pytest.raises(raysort.ConfigError, match="min_stream"):
         raysort.create("traversals", {"type": "stream", "min_stream": -1})
+    for tree in (2, 16, "8", True):
+        with pytest.raises(raysort.ConfigError, match="tree"):
+            raysort.create("traversals", {"type": "stream", "tree": tree})
 
 
 def test_pipeline_image_equals_wide(sibenik):

@@ -1,15 +1,18 @@
 /* raysort: the ray-stream traversal kernel (Barringer & Akenine-Moller 2014).
  *
- * A stream of ray ids (lanes of a gathered rs_rays batch) descends the 4-wide
- * BVH (rs_node4) together.  At each node the stream is filtered into one
- * sub-stream per child: the ids of the rays whose slab test hits that child's
- * box, RS_SW rays per SIMD test (16 on AVX-512, 8 on AVX2, 4 on SSE2, 1 on the
- * scalar build).  The sub-streams go on a task stack, nearest child (by the
- * stream's majority) on top.  A leaf tests the rays of its stream against its
- * triangles, RS_SW rays at a time.  Streams smaller than a threshold finish
- * one ray at a time from their node, as bepu's RayBatcher does.
+ * A stream of ray ids (lanes of a gathered rs_rays batch) descends a wide BVH
+ * together: the 8-wide one (rs_node8 nodes, rs_tri8 leaf groups: BVH.wide8)
+ * or the 4-wide one (rs_node4, rs_tri: BVH.wide).  At each node the stream is
+ * filtered into one sub-stream per child: the ids of the rays whose slab test
+ * hits that child's box, RS_SW rays per SIMD test (16 on AVX-512, 8 on AVX2,
+ * 4 on SSE2, 1 on the scalar build).  The sub-streams go on a task stack, the
+ * child the stream prefers on top.  A leaf tests the rays of its stream
+ * against each of its triangles, RS_SW rays at a time.  Streams smaller than a
+ * threshold finish one ray at a time from their node with the tree's
+ * single-ray kernels (wide8.h's, or simd.h's 4-wide ones), as bepu's
+ * RayBatcher does.
  *
- * Exactness: each lane performs rs_node4_hit's slab arithmetic on one child box
+ * Exactness: each lane performs rs_box1's slab arithmetic on one child box
  * and rs_tri1's Moller-Trumbore arithmetic on one triangle, in the same order
  * (simd.h; -ffp-contract=off), and a box test uses the ray's current t, which
  * only ever shrinks to a hit brute force accepts.  So a ray meets every box
@@ -19,7 +22,7 @@
 #define RAYSORT_STREAM_H
 
 #include <stdlib.h>
-#include "simd.h"
+#include "wide8.h"
 
 /* Set bits of a lane mask, and the lowest one's index (bits != 0). */
 RS_INLINE int rs_popcount(int bits)
@@ -61,6 +64,7 @@ RS_INLINE rs_swi sw_gatheri(const int32_t *base, rs_swi id)
 { return _mm512_i32gather_epi32(id, base, 4); }
 RS_INLINE rs_swf sw_set1(float a) { return _mm512_set1_ps(a); }
 RS_INLINE rs_swi sw_set1i(int32_t a) { return _mm512_set1_epi32(a); }
+RS_INLINE int sw_eqi_bits(rs_swi a, rs_swi b) { return (int)_mm512_cmpeq_epi32_mask(a, b); }
 RS_INLINE rs_swf sw_add(rs_swf a, rs_swf b) { return _mm512_add_ps(a, b); }
 RS_INLINE rs_swf sw_sub(rs_swf a, rs_swf b) { return _mm512_sub_ps(a, b); }
 RS_INLINE rs_swf sw_mul(rs_swf a, rs_swf b) { return _mm512_mul_ps(a, b); }
@@ -100,6 +104,8 @@ RS_INLINE rs_swi sw_gatheri(const int32_t *base, rs_swi id)
 { return _mm256_i32gather_epi32((const int *)base, id, 4); }
 RS_INLINE rs_swf sw_set1(float a) { return _mm256_set1_ps(a); }
 RS_INLINE rs_swi sw_set1i(int32_t a) { return _mm256_set1_epi32(a); }
+RS_INLINE int sw_eqi_bits(rs_swi a, rs_swi b)
+{ return _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(a, b))); }
 RS_INLINE rs_swf sw_add(rs_swf a, rs_swf b) { return _mm256_add_ps(a, b); }
 RS_INLINE rs_swf sw_sub(rs_swf a, rs_swf b) { return _mm256_sub_ps(a, b); }
 RS_INLINE rs_swf sw_mul(rs_swf a, rs_swf b) { return _mm256_mul_ps(a, b); }
@@ -147,6 +153,8 @@ RS_INLINE rs_swi sw_ids(const int32_t *p) { rs_swi r; memcpy(r.i, p, sizeof r.i)
 RS_INLINE rs_swi sw_gatheri(const int32_t *base, rs_swi id)
 { rs_swi r; for (int k = 0; k < RS_SW; ++k) r.i[k] = base[id.i[k]]; return r; }
 RS_INLINE rs_swi sw_set1i(int32_t a) { rs_swi r; for (int k = 0; k < RS_SW; ++k) r.i[k] = a; return r; }
+RS_INLINE int sw_eqi_bits(rs_swi a, rs_swi b)
+{ int bits = 0; for (int k = 0; k < RS_SW; ++k) bits |= (a.i[k] == b.i[k]) << k; return bits; }
 RS_INLINE void sw_storei(int32_t *p, rs_swi a) { memcpy(p, a.i, sizeof a.i); }
 #  if RS_SSE
 RS_INLINE rs_swf sw_gather(const float *base, rs_swi id)
@@ -250,65 +258,73 @@ enum rs_stream_order {
     RS_ORDER_VOTES = 1      /* the child most rays enter first, first */
 };
 
+/* Most children of a node: the 8-wide tree's. */
+#define RS_STREAM_MAX_WIDTH 8
+
 /* A stream waiting on the task stack: its ray ids are ids[first, first + n). */
 typedef struct rs_stream_task {
-    int32_t ref;        /* >= 0: a 4-wide node; < 0: a leaf, first triangle -ref - 1 */
-    int32_t tris;       /* leaf triangles */
+    int32_t ref;        /* >= 0: an inner node; < 0: a leaf, first triangle (4-wide tree)
+                         * or triangle group (8-wide tree) -ref - 1 */
+    int32_t tris;       /* a leaf's triangles (4-wide) or groups (8-wide) */
     int32_t first;      /* where its ids start in rs_stream_scratch.ids */
     int32_t n;          /* rays in the stream */
-    int32_t level;      /* depth of its box in the 4-wide tree: 0 for the root */
+    int32_t level;      /* depth of its box in the tree: 0 for the root */
 } rs_stream_task;
 
 /* A box one ray waits to visit, for the single-ray finish of small streams. */
 typedef struct rs_stream_entry {
     int32_t ref;        /* as rs_stream_task.ref */
-    int32_t tris;       /* leaf triangles */
+    int32_t tris;       /* as rs_stream_task.tris */
     float entry;        /* where the ray enters the box */
 } rs_stream_entry;
 
-/* Scratch memory of one traversal call, sized by the stream size and the
- * depth of the 4-wide tree.  Each node popped replaces its stream by at most
- * four sub-streams no larger than it, at most three of which wait while the
- * walk goes one level down; so (3 * depth + 4) streams of `size` ids, and as
- * many tasks, bound the stacks. */
+/* Scratch memory of one traversal call, sized by the stream size, the tree's
+ * width and its depth.  Each node popped replaces its stream by at most
+ * `width` sub-streams no larger than it, at most width - 1 of which wait while
+ * the walk goes one level down; so ((width - 1) * depth + width) streams of
+ * `size` ids, and as many tasks, bound the stacks. */
 typedef struct rs_stream_scratch {
     int32_t *ids;           /* stack of id slices */
-    int32_t *sub[4];        /* a node's per-child sub-streams while it is filtered */
+    int32_t *sub[RS_STREAM_MAX_WIDTH];  /* a node's per-child sub-streams while it is filtered */
     rs_stream_task *tasks;  /* task stack */
     rs_stream_entry *single;/* stack of the single-ray finish */
     int64_t *level_rays;    /* rays of the streams popped at each level, summed over the
                              * call (depth + 1 entries: the root is level 0, a leaf is one
                              * below its node; anything deeper counts in the last) */
     int size;               /* stream size (rays) */
-    int depth;              /* levels of the 4-wide tree */
+    int width;              /* children per node: 4 or 8 */
+    int depth;              /* levels of the tree */
 } rs_stream_scratch;
 
-RS_INLINE int rs_stream_slots(int depth) { return 3 * depth + 4; }
+RS_INLINE int rs_stream_slots(int width, int depth) { return (width - 1) * depth + width; }
 
 RS_INLINE void rs_stream_free(rs_stream_scratch *w)
 {
     free(w->ids);
-    for (int k = 0; k < 4; ++k)
+    for (int k = 0; k < RS_STREAM_MAX_WIDTH; ++k)
         free(w->sub[k]);
     free(w->tasks);
     free(w->single);
     free(w->level_rays);
 }
 
-/* Allocate the scratch memory; returns 0 when out of memory (nothing held). */
-RS_INLINE int rs_stream_alloc(rs_stream_scratch *w, int size, int depth)
+/* Allocate the scratch memory for a tree of `width` (4 or 8) children per node;
+ * returns 0 when out of memory (nothing held). */
+RS_INLINE int rs_stream_alloc(rs_stream_scratch *w, int size, int width, int depth)
 {
-    int slots = rs_stream_slots(depth);
+    int slots = rs_stream_slots(width, depth), ok = 1;
     w->size = size;
+    w->width = width;
     w->depth = depth;
     w->ids = (int32_t *)malloc(((size_t)slots * size + RS_SW) * sizeof(int32_t));
-    for (int k = 0; k < 4; ++k)
-        w->sub[k] = (int32_t *)malloc(((size_t)size + RS_SW) * sizeof(int32_t));
+    for (int k = 0; k < RS_STREAM_MAX_WIDTH; ++k) {
+        w->sub[k] = k < width ? (int32_t *)malloc(((size_t)size + RS_SW) * sizeof(int32_t)) : NULL;
+        ok &= k >= width || w->sub[k] != NULL;
+    }
     w->tasks = (rs_stream_task *)malloc((size_t)slots * sizeof(rs_stream_task));
     w->single = (rs_stream_entry *)malloc((size_t)slots * sizeof(rs_stream_entry));
     w->level_rays = (int64_t *)calloc((size_t)depth + 1, sizeof(int64_t));
-    if (!w->ids || !w->sub[0] || !w->sub[1] || !w->sub[2] || !w->sub[3] || !w->tasks
-        || !w->single || !w->level_rays) {
+    if (!ok || !w->ids || !w->tasks || !w->single || !w->level_rays) {
         rs_stream_free(w);
         return 0;
     }
@@ -319,20 +335,21 @@ RS_INLINE int rs_stream_alloc(rs_stream_scratch *w, int size, int depth)
 /* A stream at an inner node: filter it into the children's sub-streams      */
 /* ------------------------------------------------------------------------ */
 
-/* Split ids[0, n) into w->sub[k] (cnt[k] ids each): the rays that hit child k's
- * box before their current t.  votes[k] counts the rays for which child k is
- * the nearest box hit; negative[a] the rays travelling down axis a. */
-RS_INLINE void rs_stream_filter(const rs_rays *r, const rs_node4 *node, const int32_t *ids,
-                                int n, rs_stream_scratch *w, int cnt[4], int votes[4],
-                                int negative[3])
+/* Split ids[0, n) into sub[k] (cnt[k] ids each), k < width: the rays that hit
+ * child k's box before their current t.  The boxes are structure-of-arrays,
+ * lo[a * width + k] and hi[a * width + k] (rs_node4 or rs_node8).  votes[k]
+ * counts the rays for which child k is the nearest box hit; negative[a] the
+ * rays travelling down axis a. */
+RS_INLINE void rs_stream_filter(const rs_rays *r, int width, const float *lo, const float *hi,
+                                const int32_t *ids, int n, int32_t *const *sub, int *cnt,
+                                int *votes, int negative[3])
 {
-    int live[4], m = 0;
-    for (int k = 0; k < 4; ++k) {
+    int live[RS_STREAM_MAX_WIDTH], m = 0, down[3] = {0, 0, 0};
+    for (int k = 0; k < width; ++k) {
         cnt[k] = votes[k] = 0;
-        if (node->lo[0][k] <= node->hi[0][k])    /* an empty slot has lo > hi */
+        if (lo[k] <= hi[k])                 /* an empty slot has lo > hi */
             live[m++] = k;
     }
-    negative[0] = negative[1] = negative[2] = 0;
     const rs_swf slack = sw_set1(RS_BOX_SLACK), inf = sw_set1(INFINITY);
     for (int g = 0; g < n; g += RS_SW) {
         int valid;
@@ -343,41 +360,42 @@ RS_INLINE void rs_stream_filter(const rs_rays *r, const rs_node4 *node, const in
             o[a] = sw_gather(r->o[a], id);
             inv[a] = sw_gather(r->inv[a], id);
             neg[a] = sw_sign(inv[a]);
-            negative[a] += rs_popcount(sw_bits(neg[a]) & valid);
+            down[a] += rs_popcount(sw_bits(neg[a]) & valid);
         }
         rs_swf tmin = sw_gather(r->tmin, id), t = sw_gather(r->t, id), best = inf;
-        int nearest[4] = {0, 0, 0, 0};
+        rs_swi nearest = sw_set1i(-1);      /* per lane: j of the nearest live child hit */
         for (int j = 0; j < m; ++j) {
             int k = live[j];
             rs_swf tn = tmin, tf = t;
             for (int a = 0; a < 3; ++a) {
-                rs_swf t_lo = sw_mul(sw_sub(sw_set1(node->lo[a][k]), o[a]), inv[a]);
-                rs_swf t_hi = sw_mul(sw_sub(sw_set1(node->hi[a][k]), o[a]), inv[a]);
+                rs_swf t_lo = sw_mul(sw_sub(sw_set1(lo[a * width + k]), o[a]), inv[a]);
+                rs_swf t_hi = sw_mul(sw_sub(sw_set1(hi[a * width + k]), o[a]), inv[a]);
                 tn = sw_max(sw_blend(neg[a], t_hi, t_lo), tn);
                 tf = sw_min(sw_blend(neg[a], t_lo, t_hi), tf);
             }
             rs_swm hit = sw_and(sw_le(tn, sw_mul(tf, slack)), sw_from_bits(valid));
             int bits = sw_bits(hit);
-            sw_append(w->sub[k], &cnt[k], id, bits);
-            int closer = sw_bits(sw_and(hit, sw_lt(tn, best)));
-            best = sw_blend(sw_from_bits(closer), tn, best);
-            for (int i = 0; i < j; ++i)
-                nearest[i] &= ~closer;
-            nearest[j] = closer;
+            sw_append(sub[k], &cnt[k], id, bits);
+            rs_swm closer = sw_and(hit, sw_lt(tn, best));
+            best = sw_blend(closer, tn, best);
+            nearest = sw_blendi(closer, sw_set1i(j), nearest);
         }
         for (int j = 0; j < m; ++j)
-            votes[live[j]] += rs_popcount(nearest[j]);
+            votes[live[j]] += rs_popcount(sw_eqi_bits(nearest, sw_set1i(j)));
     }
+    for (int a = 0; a < 3; ++a)
+        negative[a] = down[a];
 }
 
 /* Order the children with a non-empty sub-stream, the one to visit first first;
  * returns how many.  Ties keep the node's child order. */
-RS_INLINE int rs_stream_order(const rs_node4 *node, const int cnt[4], const int votes[4],
-                              const int negative[3], int n, int order, int visit[4])
+RS_INLINE int rs_stream_order(int width, const float *lo, const float *hi, const int *cnt,
+                              const int *votes, const int negative[3], int n, int order,
+                              int *visit)
 {
-    float key[4];
+    float key[RS_STREAM_MAX_WIDTH];
     int m = 0;
-    for (int k = 0; k < 4; ++k) {
+    for (int k = 0; k < width; ++k) {
         if (!cnt[k])
             continue;
         if (order == RS_ORDER_VOTES) {
@@ -385,7 +403,7 @@ RS_INLINE int rs_stream_order(const rs_node4 *node, const int cnt[4], const int 
         } else {
             key[k] = 0.0f;
             for (int a = 0; a < 3; ++a)
-                key[k] += 2 * negative[a] > n ? -node->hi[a][k] : node->lo[a][k];
+                key[k] += 2 * negative[a] > n ? -hi[a * width + k] : lo[a * width + k];
         }
         int j = m++;
         while (j > 0 && key[visit[j - 1]] > key[k]) {
@@ -401,75 +419,122 @@ RS_INLINE int rs_stream_order(const rs_node4 *node, const int cnt[4], const int 
 /* A stream at a leaf                                                       */
 /* ------------------------------------------------------------------------ */
 
-/* Test the rays ids[0, n) against triangles tris[0, count), RS_SW rays at a
- * time; each lane performs rs_tri1's operations and acceptance rule. */
-RS_INLINE void rs_stream_leaf(rs_rays *r, const rs_tri *tris, int count, const int32_t *ids,
-                              int n, int any_hit)
+/* RS_SW rays of a stream at a leaf, gathered, with their closest hits so far. */
+typedef struct rs_stream_lanes {
+    rs_swi id;
+    rs_swf o[3], d[3], tmin, best, u, v;
+    rs_swi prim;
+    rs_swm valid;
+    int changed;        /* lanes whose hit changed */
+} rs_stream_lanes;
+
+RS_INLINE void rs_stream_lanes_load(const rs_rays *r, const int32_t *ids, int g, int n,
+                                    rs_stream_lanes *s)
 {
-    const rs_swf zero = sw_set1(0.0f), one = sw_set1(1.0f), retired = sw_set1(-INFINITY);
+    int valid;
+    s->id = rs_stream_group(ids, g, n, &valid);
+    for (int a = 0; a < 3; ++a) {
+        s->o[a] = sw_gather(r->o[a], s->id);
+        s->d[a] = sw_gather(r->d[a], s->id);
+    }
+    s->tmin = sw_gather(r->tmin, s->id);
+    s->best = sw_gather(r->t, s->id);
+    s->prim = sw_gatheri(r->prim, s->id);
+    s->u = s->v = sw_set1(0.0f);
+    s->valid = sw_from_bits(valid);
+    s->changed = 0;
+}
+
+/* Write the lanes whose hit changed back to the rays. */
+RS_INLINE void rs_stream_lanes_store(rs_rays *r, const rs_stream_lanes *s)
+{
+    int changed = s->changed;
+    if (!changed)
+        return;
+    float lt[RS_SW], lu[RS_SW], lv[RS_SW];
+    int32_t lp[RS_SW], li[RS_SW];
+    sw_store(lt, s->best);
+    sw_store(lu, s->u);
+    sw_store(lv, s->v);
+    sw_storei(lp, s->prim);
+    sw_storei(li, s->id);
+    for (; changed; changed &= changed - 1) {
+        int k = rs_lowest(changed);
+        int32_t i = li[k];
+        r->t[i] = lt[k];
+        r->prim[i] = lp[k];
+        r->u[i] = lu[k];
+        r->v[i] = lv[k];
+    }
+}
+
+/* The lanes against one triangle (component a of v0, e1, e2 at [a * stride]):
+ * each lane performs rs_tri1's operations and acceptance rule. */
+RS_INLINE void rs_stream_tri(rs_stream_lanes *s, const float *v0, const float *e1,
+                             const float *e2, int stride, int32_t prim, int any_hit)
+{
+    const rs_swf zero = sw_set1(0.0f), one = sw_set1(1.0f);
+    rs_swf e1x = sw_set1(e1[0]), e1y = sw_set1(e1[stride]), e1z = sw_set1(e1[2 * stride]);
+    rs_swf e2x = sw_set1(e2[0]), e2y = sw_set1(e2[stride]), e2z = sw_set1(e2[2 * stride]);
+    rs_swf dx = s->d[0], dy = s->d[1], dz = s->d[2];
+    rs_swf px = sw_sub(sw_mul(dy, e2z), sw_mul(dz, e2y));
+    rs_swf py = sw_sub(sw_mul(dz, e2x), sw_mul(dx, e2z));
+    rs_swf pz = sw_sub(sw_mul(dx, e2y), sw_mul(dy, e2x));
+    rs_swf det = sw_add(sw_add(sw_mul(e1x, px), sw_mul(e1y, py)), sw_mul(e1z, pz));
+    rs_swf inv = sw_div(one, det);
+    rs_swf sx = sw_sub(s->o[0], sw_set1(v0[0]));
+    rs_swf sy = sw_sub(s->o[1], sw_set1(v0[stride]));
+    rs_swf sz = sw_sub(s->o[2], sw_set1(v0[2 * stride]));
+    rs_swf u = sw_mul(sw_add(sw_add(sw_mul(sx, px), sw_mul(sy, py)), sw_mul(sz, pz)), inv);
+    rs_swf qx = sw_sub(sw_mul(sy, e1z), sw_mul(sz, e1y));
+    rs_swf qy = sw_sub(sw_mul(sz, e1x), sw_mul(sx, e1z));
+    rs_swf qz = sw_sub(sw_mul(sx, e1y), sw_mul(sy, e1x));
+    rs_swf v = sw_mul(sw_add(sw_add(sw_mul(dx, qx), sw_mul(dy, qy)), sw_mul(dz, qz)), inv);
+    rs_swf t = sw_mul(sw_add(sw_add(sw_mul(e2x, qx), sw_mul(e2y, qy)), sw_mul(e2z, qz)), inv);
+    rs_swi tid = sw_set1i(prim);
+    rs_swm ok = sw_and(sw_and(sw_ne(det, zero), sw_ge(u, zero)),
+                       sw_and(sw_ge(v, zero), sw_le(sw_add(u, v), one)));
+    ok = sw_and(ok, sw_gt(t, s->tmin));
+    ok = sw_and(ok, sw_or(sw_lt(t, s->best), sw_and(sw_eq(t, s->best), sw_lti(tid, s->prim))));
+    ok = sw_and(ok, s->valid);
+    s->best = sw_blend(ok, any_hit ? sw_set1(-INFINITY) : t, s->best);
+    s->prim = sw_blendi(ok, tid, s->prim);
+    s->u = sw_blend(ok, u, s->u);
+    s->v = sw_blend(ok, v, s->v);
+    s->changed |= sw_bits(ok);
+}
+
+/* Test the rays ids[0, n) against triangles tris[0, count) (the 4-wide tree's
+ * leaves), RS_SW rays at a time. */
+RS_INLINE void rs_stream_leaf4(rs_rays *r, const rs_tri *tris, int count, const int32_t *ids,
+                               int n, int any_hit)
+{
+    rs_stream_lanes s;
     for (int g = 0; g < n; g += RS_SW) {
-        int valid;
-        rs_swi id = rs_stream_group(ids, g, n, &valid);
-        rs_swf ox = sw_gather(r->o[0], id), oy = sw_gather(r->o[1], id),
-               oz = sw_gather(r->o[2], id);
-        rs_swf dx = sw_gather(r->d[0], id), dy = sw_gather(r->d[1], id),
-               dz = sw_gather(r->d[2], id);
-        rs_swf tmin = sw_gather(r->tmin, id), best = sw_gather(r->t, id);
-        rs_swi bprim = sw_gatheri(r->prim, id);
-        rs_swf bu = zero, bv = zero;
-        rs_swm lanes = sw_from_bits(valid);
-        int changed = 0;
-        for (int k = 0; k < count; ++k) {
-            const rs_tri *tr = &tris[k];
-            rs_swf e1x = sw_set1(tr->e1[0]), e1y = sw_set1(tr->e1[1]), e1z = sw_set1(tr->e1[2]);
-            rs_swf e2x = sw_set1(tr->e2[0]), e2y = sw_set1(tr->e2[1]), e2z = sw_set1(tr->e2[2]);
-            rs_swf px = sw_sub(sw_mul(dy, e2z), sw_mul(dz, e2y));
-            rs_swf py = sw_sub(sw_mul(dz, e2x), sw_mul(dx, e2z));
-            rs_swf pz = sw_sub(sw_mul(dx, e2y), sw_mul(dy, e2x));
-            rs_swf det = sw_add(sw_add(sw_mul(e1x, px), sw_mul(e1y, py)), sw_mul(e1z, pz));
-            rs_swf inv = sw_div(one, det);
-            rs_swf sx = sw_sub(ox, sw_set1(tr->v0[0]));
-            rs_swf sy = sw_sub(oy, sw_set1(tr->v0[1]));
-            rs_swf sz = sw_sub(oz, sw_set1(tr->v0[2]));
-            rs_swf u = sw_mul(sw_add(sw_add(sw_mul(sx, px), sw_mul(sy, py)), sw_mul(sz, pz)), inv);
-            rs_swf qx = sw_sub(sw_mul(sy, e1z), sw_mul(sz, e1y));
-            rs_swf qy = sw_sub(sw_mul(sz, e1x), sw_mul(sx, e1z));
-            rs_swf qz = sw_sub(sw_mul(sx, e1y), sw_mul(sy, e1x));
-            rs_swf v = sw_mul(sw_add(sw_add(sw_mul(dx, qx), sw_mul(dy, qy)), sw_mul(dz, qz)), inv);
-            rs_swf t = sw_mul(sw_add(sw_add(sw_mul(e2x, qx), sw_mul(e2y, qy)), sw_mul(e2z, qz)),
-                              inv);
-            rs_swi tid = sw_set1i(tr->id);
-            rs_swm ok = sw_and(sw_and(sw_ne(det, zero), sw_ge(u, zero)),
-                               sw_and(sw_ge(v, zero), sw_le(sw_add(u, v), one)));
-            ok = sw_and(ok, sw_gt(t, tmin));
-            ok = sw_and(ok, sw_or(sw_lt(t, best), sw_and(sw_eq(t, best), sw_lti(tid, bprim))));
-            ok = sw_and(ok, lanes);
-            int bits = sw_bits(ok);
-            if (bits) {
-                best = sw_blend(ok, any_hit ? retired : t, best);
-                bprim = sw_blendi(ok, tid, bprim);
-                bu = sw_blend(ok, u, bu);
-                bv = sw_blend(ok, v, bv);
-                changed |= bits;
-            }
+        rs_stream_lanes_load(r, ids, g, n, &s);
+        for (int k = 0; k < count; ++k)
+            rs_stream_tri(&s, tris[k].v0, tris[k].e1, tris[k].e2, 1, tris[k].id, any_hit);
+        rs_stream_lanes_store(r, &s);
+    }
+}
+
+/* Test the rays ids[0, n) against the triangles of groups[0, count) (the 8-wide
+ * tree's leaves), RS_SW rays per triangle; a group's unused lanes (id
+ * INT32_MAX, zero edges: never hit) are skipped. */
+RS_INLINE void rs_stream_leaf8(rs_rays *r, const rs_tri8 *groups, int count, const int32_t *ids,
+                               int n, int any_hit)
+{
+    rs_stream_lanes s;
+    for (int g = 0; g < n; g += RS_SW) {
+        rs_stream_lanes_load(r, ids, g, n, &s);
+        for (int j = 0; j < count; ++j) {
+            const rs_tri8 *tr = &groups[j];
+            for (int k = 0; k < 8; ++k)
+                if (tr->id[k] != INT32_MAX)
+                    rs_stream_tri(&s, &tr->v0[0][k], &tr->e1[0][k], &tr->e2[0][k], 8,
+                                  tr->id[k], any_hit);
         }
-        if (changed) {
-            float lt[RS_SW], lu[RS_SW], lv[RS_SW];
-            int32_t lp[RS_SW], li[RS_SW];
-            sw_store(lt, best);
-            sw_store(lu, bu);
-            sw_store(lv, bv);
-            sw_storei(lp, bprim);
-            sw_storei(li, id);
-            for (; changed; changed &= changed - 1) {
-                int k = rs_lowest(changed);
-                int32_t i = li[k];
-                r->t[i] = lt[k];
-                r->prim[i] = lp[k];
-                r->u[i] = lu[k];
-                r->v[i] = lv[k];
-            }
-        }
+        rs_stream_lanes_store(r, &s);
     }
 }
 
@@ -477,43 +542,66 @@ RS_INLINE void rs_stream_leaf(rs_rays *r, const rs_tri *tris, int count, const i
 /* A small stream: one ray at a time from its node                          */
 /* ------------------------------------------------------------------------ */
 
-/* Ask for a box's data ahead of its visit: a 4-wide node's two cache lines, or
- * a leaf's first triangles (hints; no effect on results). */
-RS_INLINE void rs_stream_prefetch(const rs_node4 *nodes, const rs_tri *tris, int32_t ref)
+/* Ask for a box's data ahead of its visit (hints; no effect on results):
+ * `lines` cache lines of an inner node or of a leaf's first triangles. */
+RS_INLINE void rs_stream_prefetch(const void *node, int lines)
 {
-    const char *p = ref >= 0 ? (const char *)&nodes[ref] : (const char *)&tris[-ref - 1];
-    rs_prefetch(p);
-    rs_prefetch(p + 64);
+    const char *p = (const char *)node;
+    for (int k = 0; k < lines; ++k)
+        rs_prefetch(p + 64 * k);
 }
 
-/* Ray i from box (ref, tris) down, as the `wide` traversal walks from the root:
- * children hit are visited nearest first, waiting boxes are dropped once the
- * ray's t is closer than where it enters them. */
-RS_INLINE void rs_stream_single(const rs_node4 *nodes, const rs_tri *tris, rs_rays *r, int i,
-                                int32_t ref, int32_t count, int any_hit,
-                                rs_stream_entry *stack, rs_counters *c)
+/* Insert (ref, tris, entry) into hit[0, m), which is sorted nearest first. */
+RS_INLINE void rs_stream_insert(rs_stream_entry *hit, int m, int32_t ref, int32_t tris,
+                                float entry)
 {
-    rs_stream_entry hit[4], tmp;
+    int j = m;
+    while (j > 0 && hit[j - 1].entry > entry) {
+        hit[j] = hit[j - 1];
+        --j;
+    }
+    hit[j].ref = ref;
+    hit[j].tris = tris;
+    hit[j].entry = entry;
+}
+
+/* Pop waiting boxes until one ray i still enters before its closest hit
+ * (entry <= t * slack: what a new slab test would decide); 0 when none is left. */
+RS_INLINE int rs_stream_pop(const rs_rays *r, int i, const rs_stream_entry *stack, int *sp,
+                            int32_t *ref, int32_t *tris)
+{
+    while (*sp > 0) {
+        const rs_stream_entry *e = &stack[--*sp];
+        if (e->entry <= r->t[i] * RS_BOX_SLACK) {
+            *ref = e->ref;
+            *tris = e->tris;
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* Ray i from box (ref, count) of the 4-wide tree down, as the `wide`
+ * traversal walks from the root: children hit are visited nearest first,
+ * waiting boxes are dropped once the ray's t is closer than where it enters
+ * them. */
+RS_INLINE void rs_stream_single4(const rs_node4 *nodes, const rs_tri *tris, rs_rays *r, int i,
+                                 int32_t ref, int32_t count, int any_hit,
+                                 rs_stream_entry *stack, rs_counters *c)
+{
+    rs_stream_entry hit[4];
     float entry[4];
     int sp = 0;
-    while (1) {
+    for (;;) {
         if (ref >= 0) {
             const rs_node4 *n = &nodes[ref];
             c->box4 += 1;
             int mask = rs_node4_hit(r, i, n, entry), m = 0;
-            for (int k = 0; k < 4; ++k) {
-                if (!(mask >> k & 1))
-                    continue;
-                hit[m].ref = n->child[k];
-                hit[m].tris = n->count[k];
-                hit[m].entry = entry[k];
-                rs_stream_prefetch(nodes, tris, hit[m].ref);
-                for (int j = m; j > 0 && hit[j - 1].entry > hit[j].entry; --j) {
-                    tmp = hit[j - 1];
-                    hit[j - 1] = hit[j];
-                    hit[j] = tmp;
-                }
-                ++m;
+            for (; mask; mask &= mask - 1, ++m) {
+                int k = rs_lowest(mask);
+                rs_stream_insert(hit, m, n->child[k], n->count[k], entry[k]);
+                rs_stream_prefetch(n->child[k] >= 0 ? (const void *)&nodes[n->child[k]]
+                                   : (const void *)&tris[-n->child[k] - 1], 2);
             }
             for (int k = m - 1; k > 0; --k)     /* farther children wait, farthest deepest */
                 stack[sp++] = hit[k];
@@ -531,16 +619,57 @@ RS_INLINE void rs_stream_single(const rs_node4 *nodes, const rs_tri *tris, rs_ra
             if (!(r->tmin[i] < r->t[i]))        /* an any-hit query found its hit */
                 return;
         }
-        /* the nearest waiting box the ray still reaches before its closest hit */
-        for (;;) {
-            if (sp == 0)
+        if (!rs_stream_pop(r, i, stack, &sp, &ref, &count))
+            return;
+    }
+}
+
+/* Ray i from box (ref, count) of the 8-wide tree down, as the `wide8`
+ * traversal walks from the root (one ray against a node's eight boxes, and
+ * against a leaf's groups of eight triangles). */
+RS_INLINE void rs_stream_single8(const rs_node8 *nodes, const rs_tri8 *groups, rs_rays *r, int i,
+                                 int32_t ref, int32_t count, int any_hit,
+                                 rs_stream_entry *stack, rs_counters *c)
+{
+    rs_stream_entry hit[8];
+    float entry[8];
+    rs_ray8 ray;
+    int sp = 0;
+    rs_ray8_load(r, i, &ray);
+    for (;;) {
+        if (ref >= 0) {
+            const rs_node8 *n = &nodes[ref];
+            c->box4 += 1;
+            int mask = rs_node8_hit(r, i, &ray, n, entry), m = 0;
+            for (; mask; mask &= mask - 1, ++m) {
+                int k = rs_lowest(mask);
+                rs_stream_insert(hit, m, n->child[k], n->count[k], entry[k]);
+            }
+            for (int k = m - 1; k > 0; --k) {   /* farther children wait, farthest deepest */
+                stack[sp++] = hit[k];
+                rs_prefetch(hit[k].ref >= 0 ? (const void *)&nodes[hit[k].ref]
+                            : (const void *)&groups[-hit[k].ref - 1]);
+            }
+            if (m) {
+                ref = hit[0].ref;
+                count = hit[0].tris;
+                if (ref >= 0)
+                    rs_stream_prefetch(&nodes[ref], 4);
+                else
+                    rs_stream_prefetch(&groups[-ref - 1], 5);
+                continue;
+            }
+        } else {
+            const rs_tri8 *g = &groups[-ref - 1];
+            for (int k = 0; k < count; ++k) {
+                c->tri4 += 1;
+                rs_tri8_hit(r, i, &ray, &g[k], any_hit);
+            }
+            if (!(r->tmin[i] < r->t[i]))        /* an any-hit query found its hit */
                 return;
-            --sp;
-            if (stack[sp].entry <= r->t[i] * RS_BOX_SLACK)
-                break;
         }
-        ref = stack[sp].ref;
-        count = stack[sp].tris;
+        if (!rs_stream_pop(r, i, stack, &sp, &ref, &count))
+            return;
     }
 }
 
@@ -548,20 +677,29 @@ RS_INLINE void rs_stream_single(const rs_node4 *nodes, const rs_tri *tris, rs_ra
 /* The traversal of one stream                                              */
 /* ------------------------------------------------------------------------ */
 
-/* Trace the n <= w->size rays whose ids are w->ids[0, n) from the root of
- * `nodes`.  Streams of fewer than min_stream rays finish one ray at a time.
+/* Trace the n <= w->size rays whose ids are w->ids[0, n) from the root of a
+ * tree of w->width children per node: rs_node4 nodes and rs_tri leaves
+ * (width 4) or rs_node8 nodes and rs_tri8 leaf groups (width 8).  Streams of
+ * fewer than min_stream rays finish one ray at a time.
  *
  * Counters, the same on every ISA: one SIMD N_B per ray and node a stream
- * visits (the ray meets the node's four child boxes, as in `wide`), one SIMD
- * N_T per triangle and 4 rays (rounded up) a leaf's stream holds, and the
- * single-ray finish counts as `wide` does.  stream_tasks and stream_rays count
- * the streams popped and the rays they held, w->level_rays the same rays by the
- * level of the box the stream was popped at (they add up to stream_rays). */
-RS_INLINE void rs_stream_trace(const rs_node4 *nodes, const rs_tri *tris, rs_rays *r, int n,
-                               int any_hit, int order, int min_stream, rs_stream_scratch *w,
-                               rs_counters *c)
+ * visits (the ray meets the node's child boxes, as in `wide` / `wide8`); at a
+ * leaf of the 4-wide tree one SIMD N_T per triangle and 4 rays (rounded up)
+ * of its stream, of the 8-wide tree one per ray and triangle group (as in
+ * `wide8`); the single-ray finish counts as `wide` / `wide8` does.
+ * stream_tasks and stream_rays count the streams popped and the rays they
+ * held, w->level_rays the same rays by the level of the box the stream was
+ * popped at (they add up to stream_rays). */
+RS_INLINE void rs_stream_walk(const int width, const void *tree, const void *leaves, rs_rays *r,
+                              int n, int any_hit, int order, int min_stream,
+                              rs_stream_scratch *w, rs_counters *c)
 {
-    int cnt[4], votes[4], negative[3], visit[4];
+    int cnt[RS_STREAM_MAX_WIDTH], votes[RS_STREAM_MAX_WIDTH], visit[RS_STREAM_MAX_WIDTH];
+    int negative[3];
+    const rs_node4 *nodes4 = (const rs_node4 *)tree;
+    const rs_node8 *nodes8 = (const rs_node8 *)tree;
+    const rs_tri *tris = (const rs_tri *)leaves;
+    const rs_tri8 *groups = (const rs_tri8 *)leaves;
     int nt = 1;
     w->tasks[0].ref = 0;
     w->tasks[0].tris = 0;
@@ -574,9 +712,14 @@ RS_INLINE void rs_stream_trace(const rs_node4 *nodes, const rs_tri *tris, rs_ray
         if (task.n < min_stream) {
             for (int j = 0; j < task.n; ++j) {
                 int i = ids[j];
-                if (r->tmin[i] < r->t[i])
-                    rs_stream_single(nodes, tris, r, i, task.ref, task.tris, any_hit, w->single,
-                                     c);
+                if (!(r->tmin[i] < r->t[i]))
+                    continue;
+                if (width == 8)
+                    rs_stream_single8(nodes8, groups, r, i, task.ref, task.tris, any_hit,
+                                      w->single, c);
+                else
+                    rs_stream_single4(nodes4, tris, r, i, task.ref, task.tris, any_hit,
+                                      w->single, c);
             }
             continue;
         }
@@ -584,31 +727,62 @@ RS_INLINE void rs_stream_trace(const rs_node4 *nodes, const rs_tri *tris, rs_ray
         c->stream_rays += task.n;
         w->level_rays[task.level < w->depth ? task.level : w->depth] += task.n;
         if (task.ref < 0) {
-            c->tri4 += (int64_t)task.tris * ((task.n + 3) / 4);
-            rs_stream_leaf(r, &tris[-task.ref - 1], task.tris, ids, task.n, any_hit);
+            if (width == 8) {
+                c->tri4 += (int64_t)task.tris * task.n;
+                rs_stream_leaf8(r, &groups[-task.ref - 1], task.tris, ids, task.n, any_hit);
+            } else {
+                c->tri4 += (int64_t)task.tris * ((task.n + 3) / 4);
+                rs_stream_leaf4(r, &tris[-task.ref - 1], task.tris, ids, task.n, any_hit);
+            }
             continue;
         }
-        const rs_node4 *node = &nodes[task.ref];
+        const float *lo = width == 8 ? &nodes8[task.ref].lo[0][0] : &nodes4[task.ref].lo[0][0];
+        const float *hi = width == 8 ? &nodes8[task.ref].hi[0][0] : &nodes4[task.ref].hi[0][0];
+        const int32_t *child = width == 8 ? nodes8[task.ref].child : nodes4[task.ref].child;
+        const uint16_t *count = width == 8 ? nodes8[task.ref].count : nodes4[task.ref].count;
         c->box4 += task.n;
-        rs_stream_filter(r, node, ids, task.n, w, cnt, votes, negative);
-        int m = rs_stream_order(node, cnt, votes, negative, task.n, order, visit);
+        rs_stream_filter(r, width, lo, hi, ids, task.n, w->sub, cnt, votes, negative);
+        int m = rs_stream_order(width, lo, hi, cnt, votes, negative, task.n, order, visit);
         /* the parent's ids are read: its slice takes the sub-streams, the one
          * to visit first last, so it is popped first */
         int first = task.first;
         for (int j = m - 1; j >= 0; --j) {
             int k = visit[j];
             memcpy(w->ids + first, w->sub[k], (size_t)cnt[k] * sizeof(int32_t));
-            rs_stream_task *child = &w->tasks[nt++];
-            child->ref = node->child[k];
-            child->tris = node->count[k];
-            child->first = first;
-            child->n = cnt[k];
-            child->level = task.level + 1;
+            rs_stream_task *next = &w->tasks[nt++];
+            next->ref = child[k];
+            next->tris = count[k];
+            next->first = first;
+            next->n = cnt[k];
+            next->level = task.level + 1;
             first += cnt[k];
         }
-        if (m)
-            rs_stream_prefetch(nodes, tris, node->child[visit[0]]);
+        if (m) {
+            int32_t ref = child[visit[0]];
+            if (width == 8)
+                rs_stream_prefetch(ref >= 0 ? (const void *)&nodes8[ref]
+                                   : (const void *)&groups[-ref - 1], 4);
+            else
+                rs_stream_prefetch(ref >= 0 ? (const void *)&nodes4[ref]
+                                   : (const void *)&tris[-ref - 1], 2);
+        }
     }
+}
+
+/* rs_stream_walk over the 4-wide tree (BVH.wide, BVH.triangles). */
+static void rs_stream_trace4(const rs_node4 *nodes, const rs_tri *tris, rs_rays *r, int n,
+                             int any_hit, int order, int min_stream, rs_stream_scratch *w,
+                             rs_counters *c)
+{
+    rs_stream_walk(4, nodes, tris, r, n, any_hit, order, min_stream, w, c);
+}
+
+/* rs_stream_walk over the 8-wide tree (BVH.wide8's nodes and groups). */
+static void rs_stream_trace8(const rs_node8 *nodes, const rs_tri8 *groups, rs_rays *r, int n,
+                             int any_hit, int order, int min_stream, rs_stream_scratch *w,
+                             rs_counters *c)
+{
+    rs_stream_walk(8, nodes, groups, r, n, any_hit, order, min_stream, w, c);
 }
 
 #endif
