@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import math
 import numbers
+import sys
+import threading
 
 import numpy as np
 
@@ -67,6 +69,50 @@ def aligned_empty(shape, dtype, align=ALIGN):
     raw = np.empty(nbytes + align, dtype=np.uint8)
     start = (-raw.ctypes.data) % align
     return raw[start:start + nbytes].view(dtype).reshape(shape)
+
+
+def _sole_count():
+    """What ``sys.getrefcount(blocks[i])`` says of an object only the list ``blocks`` holds."""
+    blocks = [object()]
+    return sys.getrefcount(blocks[0])
+
+
+class _Recycler(threading.local):
+    """Each thread's few most recent blocks of memory for :class:`Packets` and :class:`Hits`.
+
+    A batch's packets and hits are large (60 bytes per ray) and short-lived: fresh
+    arrays would fault in their pages on first touch, batch after batch.  A block is
+    handed out again only when nothing but this pool refers to it, i.e. when every
+    array viewing it (a :class:`Packets`' rows, a caller's :class:`Hits`) is gone, so a
+    result never shares memory with a later batch's while anyone can still read it.
+    """
+
+    SOLE = _sole_count()
+    KEEP = 8            # blocks kept per thread
+    GRAIN = 1 << 16     # sizes rounded up to this many bytes, so that similar batches share
+
+    def __init__(self):
+        self.blocks = []    # uint8 arrays, least recently used first
+
+    def take(self, nbytes, align=ALIGN):
+        """An uninitialised ``align``-aligned uint8 array of ``nbytes`` bytes."""
+        blocks = self.blocks
+        want = nbytes + align
+        for i in range(len(blocks) - 1, -1, -1):
+            if want <= blocks[i].nbytes <= 2 * want + self.GRAIN \
+                    and sys.getrefcount(blocks[i]) == self.SOLE:
+                raw = blocks.pop(i)
+                break
+        else:
+            raw = np.empty(-(-want // self.GRAIN) * self.GRAIN, np.uint8)
+            if len(blocks) >= self.KEEP:
+                del blocks[0]
+        blocks.append(raw)
+        start = (-raw.ctypes.data) % align
+        return raw[start:start + nbytes]
+
+
+_recycler = _Recycler()
 
 
 class RayBatch:
@@ -171,16 +217,22 @@ class RayBatch:
         return out
 
 
+_HIT_DTYPES = (np.float32, np.int32, np.float32, np.float32)
+
+
 class Hits:
     """Closest hits in batch order: ``t`` (+inf on a miss), ``prim`` (-1), ``u``, ``v``."""
 
     __slots__ = ("t", "prim", "u", "v")
 
     def __init__(self, n, _prim=-1):
-        self.t = np.full(n, np.inf, dtype=np.float32)
-        self.prim = np.full(n, _prim, dtype=np.int32)
-        self.u = np.zeros(n, dtype=np.float32)
-        self.v = np.zeros(n, dtype=np.float32)
+        block = _recycler.take(4 * 4 * n)
+        self.t, self.prim, self.u, self.v = (block[4 * n * k:4 * n * (k + 1)].view(dtype)
+                                             for k, dtype in enumerate(_HIT_DTYPES))
+        self.t[:] = np.inf
+        self.prim[:] = _prim
+        self.u[:] = 0
+        self.v[:] = 0
 
     def __len__(self):
         return len(self.t)
@@ -209,9 +261,9 @@ class Packets:
         the batch index of the ray in each lane, -1 for padding.
     """
 
-    __slots__ = ("rows", "prim", "u", "v", "starts", "counts", "index")
+    __slots__ = ("rows", "prim", "u", "v", "starts", "counts", "index", "_extra")
 
-    def __init__(self, counts):
+    def __init__(self, counts, _extra_rows=0):
         counts = np.asarray(counts, dtype=np.int32)
         padded = (counts.astype(np.int64) + 3) & ~3
         self.counts = counts
@@ -219,17 +271,20 @@ class Packets:
         if len(counts):
             np.cumsum(padded[:-1], out=self.starts[1:])
         capacity = max(int(padded.sum()), 4)
-        self.rows = aligned_empty((len(PACKET_ROWS), capacity), np.float32)
-        self.prim = aligned_empty((capacity,), np.int32)
-        self.u = aligned_empty((capacity,), np.float32)
-        self.v = aligned_empty((capacity,), np.float32)
-        self.index = aligned_empty((capacity,), np.int32)
+        # one block: the packet rows, then prim, u, v, index (and the caller's extra rows)
+        n_rows = len(PACKET_ROWS) + 4 + _extra_rows
+        block = _recycler.take(n_rows * capacity * 4).view(np.float32).reshape(n_rows, capacity)
+        self.rows = block[:len(PACKET_ROWS)]
+        self.prim, self.u, self.v, self.index = block[len(PACKET_ROWS):len(PACKET_ROWS) + 4]
+        self.prim = self.prim.view(np.int32)
+        self.index = self.index.view(np.int32)
+        self._extra = block[len(PACKET_ROWS) + 4:]
 
     def slice(self, first, last):
         """A view of sub-packets ``[first, last)`` sharing this batch's rows and hits
         (for splitting one traversal call over threads)."""
         view = object.__new__(Packets)
-        for name in ("rows", "prim", "u", "v", "index"):
+        for name in ("rows", "prim", "u", "v", "index", "_extra"):
             setattr(view, name, getattr(self, name))
         view.starts, view.counts = self.starts[first:last], self.counts[first:last]
         return view
@@ -320,8 +375,8 @@ def gather_checked(rays, order, offsets, packets, keep_tmax=False, check_order=T
     kernels = isa.module("_gather")
     if len(order) != len(rays) or not kernels.offsets_valid(offsets, len(rays), max_packet):
         return None, None, -1
-    batch = Packets(np.diff(offsets))
-    tmax = np.empty(batch.capacity, np.float32) if keep_tmax else None
+    batch = Packets(np.diff(offsets), _extra_rows=int(keep_tmax))
+    tmax = batch._extra[0] if keep_tmax else None
     order_ok, bad_ray = kernels.gather(rays.data, order, offsets, batch.starts, batch.rows,
                                        batch.prim, batch.u, batch.v, batch.index, packets,
                                        tmax, check_order)
