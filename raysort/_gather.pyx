@@ -35,6 +35,20 @@ def offsets_valid(const int32_t[::1] offsets, int32_t n, int32_t max_packet=RS_M
     return not bad
 
 
+def layout(const int32_t[::1] counts, int32_t[::1] starts):
+    """``starts[k]``: where sub-packet k of ``counts[k]`` rays starts, each at a multiple
+    of 4 after the one before; returns the lanes they take (at least 4)."""
+    cdef Py_ssize_t k
+    cdef int64_t lanes = 0
+    if starts.shape[0] != counts.shape[0]:
+        raise ValueError("layout: one start per sub-packet")
+    with nogil:
+        for k in range(counts.shape[0]):
+            starts[k] = <int32_t> lanes
+            lanes += (<int64_t> counts[k] + 3) & ~3
+    return max(lanes, 4)
+
+
 def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1] offsets,
            const int32_t[::1] starts, float[:, ::1] dst, int32_t[::1] prim, float[::1] u,
            float[::1] v, int32_t[::1] index, const int32_t[::1] packets, float[::1] t0=None,

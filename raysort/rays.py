@@ -72,9 +72,10 @@ def aligned_empty(shape, dtype, align=ALIGN):
 
 
 def _sole_count():
-    """What ``sys.getrefcount(blocks[i])`` says of an object only the list ``blocks`` holds."""
-    blocks = [object()]
-    return sys.getrefcount(blocks[0])
+    """What ``sys.getrefcount(blocks[i][0])`` says of an object only the pair in the list
+    ``blocks`` holds."""
+    blocks = [(object(), 0)]
+    return sys.getrefcount(blocks[0][0])
 
 
 class _Recycler(threading.local):
@@ -88,27 +89,29 @@ class _Recycler(threading.local):
     """
 
     SOLE = _sole_count()
-    KEEP = 8            # blocks kept per thread
+    KEEP = 12           # blocks kept per thread, least recently used dropped first ...
+    BUDGET = 1 << 26    # ... and while they hold more bytes than this (64 MiB)
     GRAIN = 1 << 16     # sizes rounded up to this many bytes, so that similar batches share
 
     def __init__(self):
-        self.blocks = []    # uint8 arrays, least recently used first
+        self.blocks = []    # (uint8 array, offset of its first ALIGN-aligned byte), oldest first
 
-    def take(self, nbytes, align=ALIGN):
-        """An uninitialised ``align``-aligned uint8 array of ``nbytes`` bytes."""
+    def take(self, nbytes):
+        """An uninitialised ALIGN-aligned uint8 array of ``nbytes`` bytes."""
         blocks = self.blocks
-        want = nbytes + align
+        want = nbytes + ALIGN
         for i in range(len(blocks) - 1, -1, -1):
-            if want <= blocks[i].nbytes <= 2 * want + self.GRAIN \
-                    and sys.getrefcount(blocks[i]) == self.SOLE:
-                raw = blocks.pop(i)
+            if want <= blocks[i][0].nbytes <= 2 * want + self.GRAIN \
+                    and sys.getrefcount(blocks[i][0]) == self.SOLE:
+                raw, start = blocks.pop(i)
                 break
         else:
             raw = np.empty(-(-want // self.GRAIN) * self.GRAIN, np.uint8)
-            if len(blocks) >= self.KEEP:
-                del blocks[0]
-        blocks.append(raw)
-        start = (-raw.ctypes.data) % align
+            start = (-raw.ctypes.data) % ALIGN
+            held = raw.nbytes + sum(block.nbytes for block, _ in blocks)
+            while blocks and (len(blocks) >= self.KEEP or held > self.BUDGET):
+                held -= blocks.pop(0)[0].nbytes
+        blocks.append((raw, start))
         return raw[start:start + nbytes]
 
 
@@ -264,13 +267,9 @@ class Packets:
     __slots__ = ("rows", "prim", "u", "v", "starts", "counts", "index", "_extra")
 
     def __init__(self, counts, _extra_rows=0):
-        counts = np.asarray(counts, dtype=np.int32)
-        padded = (counts.astype(np.int64) + 3) & ~3
-        self.counts = counts
-        self.starts = np.zeros(len(counts), dtype=np.int32)
-        if len(counts):
-            np.cumsum(padded[:-1], out=self.starts[1:])
-        capacity = max(int(padded.sum()), 4)
+        self.counts = counts = np.ascontiguousarray(counts, dtype=np.int32)
+        self.starts = np.empty(len(counts), dtype=np.int32)
+        capacity = isa.module("_gather").layout(counts, self.starts)
         # one block: the packet rows, then prim, u, v, index (and the caller's extra rows)
         n_rows = len(PACKET_ROWS) + 4 + _extra_rows
         block = _recycler.take(n_rows * capacity * 4).view(np.float32).reshape(n_rows, capacity)

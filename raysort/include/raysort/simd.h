@@ -1,7 +1,8 @@
 /* raysort: the one SIMD header.
  *
- * With wide8.h (the 8-lane kernels built on it), the only file that includes
- * compiler intrinsics.  It provides
+ * With the wider vocabularies built on it (lanes.h: RS_SW lanes by ISA;
+ * wide8.h: 8 lanes), the only files that include compiler intrinsics.  It
+ * provides
  *   - a 4-lane float/mask vocabulary (rs_v4f, rs_v4m) with an SSE2 path and a
  *     portable scalar path, chosen at build time: setup.py defines
  *     RAYSORT_NO_SIMD for the "scalar" ISA build, and non-x86 machines get the
