@@ -79,11 +79,12 @@ def _sole_count():
 
 
 class _Recycler(threading.local):
-    """Each thread's few most recent blocks of memory for :class:`Packets` and :class:`Hits`.
+    """Each thread's few most recent blocks of memory for :class:`RayBatch`,
+    :class:`Packets` and :class:`Hits`.
 
-    A batch's packets and hits are large (60 bytes per ray) and short-lived: fresh
-    arrays would fault in their pages on first touch, batch after batch.  A block is
-    handed out again only when nothing but this pool refers to it, i.e. when every
+    A batch's rays, packets and hits are large (108 bytes per ray) and short-lived:
+    fresh arrays would fault in their pages on first touch, batch after batch.  A block
+    is handed out again only when nothing but this pool refers to it, i.e. when every
     array viewing it (a :class:`Packets`' rows, a caller's :class:`Hits`) is gone, so a
     result never shares memory with a later batch's while anyone can still read it.
     """
@@ -91,13 +92,15 @@ class _Recycler(threading.local):
     SOLE = _sole_count()
     KEEP = 12           # blocks kept per thread, least recently used dropped first ...
     BUDGET = 1 << 26    # ... and while they hold more bytes than this (64 MiB)
-    GRAIN = 1 << 16     # sizes rounded up to this many bytes, so that similar batches share
+    GRAIN = 1 << 16     # smaller blocks are not kept; sizes are rounded up to a multiple
 
     def __init__(self):
         self.blocks = []    # (uint8 array, offset of its first ALIGN-aligned byte), oldest first
 
     def take(self, nbytes):
         """An uninitialised ALIGN-aligned uint8 array of ``nbytes`` bytes."""
+        if nbytes < self.GRAIN:         # small: the heap has it at hand anyway
+            return aligned_empty((nbytes,), np.uint8)
         blocks = self.blocks
         want = nbytes + ALIGN
         for i in range(len(blocks) - 1, -1, -1):
@@ -139,7 +142,9 @@ class RayBatch:
         n = int(n)
         self.n = n
         self.prev_t = None
-        self.data = aligned_empty((len(RAY_ROWS), max(_round4(n), 4)), np.float32)
+        capacity = max(_round4(n), 4)
+        self.data = _recycler.take(len(RAY_ROWS) * capacity * 4).view(np.float32).reshape(
+            len(RAY_ROWS), capacity)
         self.data[:] = 0.0
         self.data[_TMIN, n:] = np.inf
         self.data[_TMAX, n:] = -np.inf

@@ -154,7 +154,7 @@ def test_dropped_batches_give_their_memory_back():
 def test_no_hits_leak_from_one_batch_into_the_next():
     """A ray no lane wrote (a trusted order that repeats a ray) reads as a miss, not as
     the hit an earlier batch left in recycled memory."""
-    n = 64
+    n = 6000      # hits of 96 kB: recycled
     rays, order, offsets = batch(3, n)
     packets, tmax, _ = gather_checked(rays, order, offsets, np.array([0, n], np.int32),
                                       keep_tmax=True)
@@ -163,6 +163,7 @@ def test_no_hits_leak_from_one_batch_into_the_next():
     packets.u[:] = packets.v[:] = 0.25
     hits, fault = scatter_checked(packets, order, offsets, tmax, 10, False, check_hits=False)
     assert fault is None and (hits.prim == 5).all()
+    address = hits.prim.ctypes.data
     del hits, packets, tmax
     repeated = order.copy()
     repeated[1] = repeated[0]
@@ -170,7 +171,7 @@ def test_no_hits_leak_from_one_batch_into_the_next():
                                       check_order=False)
     hits, fault = scatter_checked(packets, repeated, offsets, None, 10, False,
                                   check_hits=False, check_order=False)
-    assert fault is None
+    assert fault is None and hits.prim.ctypes.data == address
     missing = order[1]
     assert hits.prim[missing] == -1 and hits.t[missing] == np.inf
     assert hits.u[missing] == 0 and hits.v[missing] == 0
@@ -196,3 +197,21 @@ def test_threads_gather_into_their_own_memory():
     for t in threads:
         t.join()
     assert not errors
+
+
+def test_a_new_ray_batch_starts_clean_in_recycled_memory():
+    """A ray batch made where a dropped one lived holds zeros and inactive padding, and
+    one still held keeps its rays."""
+    n = 5001
+    held = RayBatch(n)
+    held.data[:] = 7.0
+    dropped = RayBatch(n)
+    dropped.data[:] = 5.0
+    address = dropped.data.ctypes.data
+    del dropped
+    fresh = RayBatch(n)
+    assert fresh.data.ctypes.data == address
+    assert (fresh.data[:, :n] == 0).all()
+    assert (fresh.data[RayRow.tmin, n:] == np.inf).all()
+    assert (fresh.data[RayRow.tmax, n:] == -np.inf).all()
+    assert (held.data == 7.0).all()
