@@ -79,14 +79,15 @@ def _sole_count():
 
 
 class _Recycler(threading.local):
-    """Each thread's few most recent blocks of memory for :class:`RayBatch`,
-    :class:`Packets` and :class:`Hits`.
+    """Each thread's few most recent blocks of memory for :class:`RayBatch` and
+    :class:`Packets`.
 
-    A batch's rays, packets and hits are large (108 bytes per ray) and short-lived:
-    fresh arrays would fault in their pages on first touch, batch after batch.  A block
-    is handed out again only when nothing but this pool refers to it, i.e. when every
-    array viewing it (a :class:`Packets`' rows, a caller's :class:`Hits`) is gone, so a
+    A batch's rays and packets are large (92 bytes per ray) and short-lived: fresh
+    arrays would fault in their pages on first touch, batch after batch.  A block is
+    handed out again only when nothing but this pool refers to it, i.e. when every
+    array viewing it (a :class:`Packets`' rows, a caller's ray batch) is gone, so a
     result never shares memory with a later batch's while anyone can still read it.
+    (Hits, 16 bytes per ray, come from the heap: recycling them did not pay.)
     """
 
     SOLE = _sole_count()
@@ -119,6 +120,20 @@ class _Recycler(threading.local):
 
 
 _recycler = _Recycler()
+LINE = 64   # bytes of a cache line
+
+
+def _carve(*sizes):
+    """uint8 arrays of ``sizes`` bytes in one recycled block, each starting on a cache
+    line one line further round the cache than the one before, so that arrays of the
+    same length do not compete for the same cache sets when a kernel streams them
+    together (a length of a multiple of 4 kB would make them)."""
+    starts, end = [], 0
+    for k, size in enumerate(sizes):
+        starts.append(end)
+        end += -(-size // LINE) * LINE + LINE
+    block = _recycler.take(end)
+    return [block[start:start + size] for start, size in zip(starts, sizes)]
 
 
 class RayBatch:
@@ -225,22 +240,16 @@ class RayBatch:
         return out
 
 
-_HIT_DTYPES = (np.float32, np.int32, np.float32, np.float32)
-
-
 class Hits:
     """Closest hits in batch order: ``t`` (+inf on a miss), ``prim`` (-1), ``u``, ``v``."""
 
     __slots__ = ("t", "prim", "u", "v")
 
     def __init__(self, n, _prim=-1):
-        block = _recycler.take(4 * 4 * n)
-        self.t, self.prim, self.u, self.v = (block[4 * n * k:4 * n * (k + 1)].view(dtype)
-                                             for k, dtype in enumerate(_HIT_DTYPES))
-        self.t[:] = np.inf
-        self.prim[:] = _prim
-        self.u[:] = 0
-        self.v[:] = 0
+        self.t = np.full(n, np.inf, dtype=np.float32)
+        self.prim = np.full(n, _prim, dtype=np.int32)
+        self.u = np.zeros(n, dtype=np.float32)
+        self.v = np.zeros(n, dtype=np.float32)
 
     def __len__(self):
         return len(self.t)
@@ -276,13 +285,13 @@ class Packets:
         self.starts = np.empty(len(counts), dtype=np.int32)
         capacity = isa.module("_gather").layout(counts, self.starts)
         # one block: the packet rows, then prim, u, v, index (and the caller's extra rows)
-        n_rows = len(PACKET_ROWS) + 4 + _extra_rows
-        block = _recycler.take(n_rows * capacity * 4).view(np.float32).reshape(n_rows, capacity)
-        self.rows = block[:len(PACKET_ROWS)]
-        self.prim, self.u, self.v, self.index = block[len(PACKET_ROWS):len(PACKET_ROWS) + 4]
-        self.prim = self.prim.view(np.int32)
-        self.index = self.index.view(np.int32)
-        self._extra = block[len(PACKET_ROWS) + 4:]
+        lane_bytes = capacity * 4
+        rows, prim, u, v, index, *extra = _carve(len(PACKET_ROWS) * lane_bytes,
+                                                 *[lane_bytes] * (4 + _extra_rows))
+        self.rows = rows.view(np.float32).reshape(len(PACKET_ROWS), capacity)
+        self.prim, self.index = prim.view(np.int32), index.view(np.int32)
+        self.u, self.v = u.view(np.float32), v.view(np.float32)
+        self._extra = [row.view(np.float32) for row in extra]
 
     def slice(self, first, last):
         """A view of sub-packets ``[first, last)`` sharing this batch's rows and hits

@@ -1,5 +1,5 @@
 """The gather on every ISA against a NumPy statement of its rules, and the recycling of
-the memory of packets and hits between batches.
+the memory of ray batches and packets between batches.
 
 The reference lays the order out lane by lane (each sub-packet at a multiple of 4 right
 after the previous one's padded end) and applies the packet rules with NumPy: a ray is
@@ -153,8 +153,8 @@ def test_dropped_batches_give_their_memory_back():
 
 def test_no_hits_leak_from_one_batch_into_the_next():
     """A ray no lane wrote (a trusted order that repeats a ray) reads as a miss, not as
-    the hit an earlier batch left in recycled memory."""
-    n = 6000      # hits of 96 kB: recycled
+    the hit an earlier batch left in its lanes."""
+    n = 6000
     rays, order, offsets = batch(3, n)
     packets, tmax, _ = gather_checked(rays, order, offsets, np.array([0, n], np.int32),
                                       keep_tmax=True)
@@ -163,7 +163,6 @@ def test_no_hits_leak_from_one_batch_into_the_next():
     packets.u[:] = packets.v[:] = 0.25
     hits, fault = scatter_checked(packets, order, offsets, tmax, 10, False, check_hits=False)
     assert fault is None and (hits.prim == 5).all()
-    address = hits.prim.ctypes.data
     del hits, packets, tmax
     repeated = order.copy()
     repeated[1] = repeated[0]
@@ -171,7 +170,7 @@ def test_no_hits_leak_from_one_batch_into_the_next():
                                       check_order=False)
     hits, fault = scatter_checked(packets, repeated, offsets, None, 10, False,
                                   check_hits=False, check_order=False)
-    assert fault is None and hits.prim.ctypes.data == address
+    assert fault is None
     missing = order[1]
     assert hits.prim[missing] == -1 and hits.t[missing] == np.inf
     assert hits.u[missing] == 0 and hits.v[missing] == 0

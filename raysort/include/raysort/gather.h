@@ -26,7 +26,9 @@
 #include "lanes.h"
 
 /* Lanes between a block and the block whose rays it prefetches. */
-#define RS_GATHER_AHEAD 128
+#ifndef RS_GATHER_AHEAD
+#  define RS_GATHER_AHEAD 128
+#endif
 
 /* Lanes [j, j + RS_SW) of the packet rows from the rays ids[j..]: a padding lane
  * reads ray 0 (every batch holds at least one lane) and discards it.  Returns the
