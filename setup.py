@@ -40,6 +40,7 @@ ISA_MODULES = [
     "traversals.partition",
     "traversals.wide",
     "traversals.wide8",
+    "traversals.wide16",
     "traversals.stream",
 ]
 

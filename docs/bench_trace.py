@@ -9,7 +9,12 @@ Usage (from any directory, with raysort installed; ``embree`` needs
     python docs/bench_trace.py --kinds frame --configs nah+wide8 nah+embree --against nah+embree
 
 Each configuration is ``SORTER+TRAVERSAL`` (optionally ``@TILE`` for the tile edge of
-camera rays, e.g. ``none+ranged@8``) or a bare traversal (sorter ``none``).  For each
+camera rays, e.g. ``none+ranged@8``) or a bare traversal (sorter ``none``); a plugin may
+carry parameters, e.g. ``mitsuba:coherent=true``.  ``direct:TRAVERSAL`` (a library
+yardstick such as ``direct:embree`` or ``direct:mitsuba:coherent=true``) times only the
+library's own query (``LibraryTraversal.query``) on the rays' origins, directions and
+extents prepared beforehand: no sort, gather, scatter, nor the plugin's own array
+handling, the strictest reading of the yardstick.  For each
 scene and ray kind (``diffuse``: first-bounce diffuse rays of a 256x256 render at 1
 spp, in the render's large packets; ``camera``: its primary rays) every configuration
 traces the same rays through ``Pipeline.trace`` (sort + gather + traverse + scatter),
@@ -18,7 +23,8 @@ instead (``Pipeline.render``, 4 spp, lambert depth 2) and reports Mpixels/s.  Ea
 configuration once in an order rotated by one per round (interleaved, round 0 warms
 up and is dropped).  Reported: Mrays/s as the median over rounds with [min, max], and
 the medians [min, max] of the per-round speed ratios against the reference
-configurations (``--against``, default ``embree`` and ``nah+wide``).  Times are the
+configurations (``--against``, default ``direct:embree``, ``embree`` and
+``nah+wide8``).  Times are the
 measuring thread's CPU time (``--clock cpu``, default; robust to other load on the
 machine) or wall time (``--clock wall``).  The header names the CPU and the ISA.
 """
@@ -30,14 +36,18 @@ import statistics
 import sys
 import time
 
+import numpy as np
+
 import raysort
 from raysort import isa
 from raysort.bench.report import machine_info
 from raysort.workloads import camera_rays, workload
 
-DEFAULT_CONFIGS = ["nah+wide8", "none+wide8", "two_point+wide8", "nah+wide", "none+wide",
-                   "nah+ranged", "none+ranged@8", "embree"]
+DEFAULT_CONFIGS = ["nah+wide8", "none+wide8", "two_point+wide8", "nah+stream", "none+stream",
+                   "nah+ranged", "none+ranged@8", "embree", "direct:embree", "direct:mitsuba",
+                   "direct:mitsuba:coherent=true"]
 CLOCKS = {"cpu": time.thread_time, "wall": time.perf_counter}
+DIRECT = "direct:"      # a library traversal's own query alone (see the module docstring)
 
 
 def machine():
@@ -46,7 +56,10 @@ def machine():
 
 
 def parse_config(text):
-    """``"nah+wide8@8"`` -> (sorter, traversal, tile)."""
+    """``"nah+wide8@8"`` -> (sorter, traversal, tile); ``"direct:mitsuba"`` -> (None,
+    "mitsuba", 32)."""
+    if text.startswith(DIRECT):
+        return None, text[len(DIRECT):], 32
     body, _, tile = text.partition("@")
     sorter, _, traversal = body.rpartition("+")
     return sorter or "none", traversal, int(tile) if tile else 32
@@ -57,6 +70,17 @@ def rays_of(scene, kind, size, tile):
         return workload(scene, "diffuse:depth=1", width=size, height=size, spp=1, seed=1,
                         tile=tile)
     return camera_rays(scene, width=size, height=size, spp=1, seed=1, tile=tile)[0]
+
+
+def direct_query(library, bvh, rays):
+    """The arguments of ``library.query`` for ``rays``: (scene, origins, directions, far),
+    each ray started at ``tmin`` as :class:`raysort.sdk.LibraryTraversal` does."""
+    start = np.maximum(rays.tmin, np.float32(0))
+    far = np.where(rays.tmax > rays.tmin, np.minimum(rays.tmax - start, np.float32(1e37)), 0)
+    return (library.scene(bvh),
+            np.ascontiguousarray((rays.origins + start * rays.directions).T, np.float32),
+            np.ascontiguousarray(rays.directions.T, np.float32),
+            np.ascontiguousarray(far, np.float32))
 
 
 def measure(scene_name, kind, configs, rounds, size, clock):
@@ -71,12 +95,17 @@ def measure(scene_name, kind, configs, rounds, size, clock):
     pipes, works = {}, {}
     for c in configs:
         sorter, traversal, tile = parse_config(c)
-        pipes[c] = raysort.Pipeline(scene, sorter=sorter, traversal=traversal, tile=tile,
-                                    threads=1, check_plugins=False)
-        pipes[c]._bvh = bvh                      # one BVH for all (built above)
+        if sorter is None:
+            pipes[c] = raysort.create("traversals", traversal)
+        else:
+            pipes[c] = raysort.Pipeline(scene, sorter=sorter, traversal=traversal, tile=tile,
+                                        threads=1, check_plugins=False)
+            pipes[c]._bvh = bvh                  # one BVH for all (built above)
         if tile not in works:
             works[tile] = None if kind == "frame" else \
                 rays_of(scene, kind, size, tile if kind == "camera" else 32)
+    direct = {c: direct_query(pipes[c], bvh, works[32].rays) for c in configs
+              if parse_config(c)[0] is None}
     times = {c: [] for c in configs}
     for r in range(rounds + 1):                  # round 0 warms up and is not kept
         for k in range(len(configs)):
@@ -85,6 +114,8 @@ def measure(scene_name, kind, configs, rounds, size, clock):
             t0 = clock()
             if kind == "frame":
                 pipes[c].render(size, size, spp=4, seed=0)
+            elif parse_config(c)[0] is None:
+                pipes[c].query(*direct[c], False)
             else:
                 pipes[c].trace(work.rays, work.packets)
             dt = clock() - t0
@@ -105,14 +136,15 @@ def main(argv=None):
     ap.add_argument("--kinds", nargs="+", default=["diffuse", "camera"],
                     choices=["diffuse", "camera", "frame"])
     ap.add_argument("--configs", nargs="+", default=DEFAULT_CONFIGS)
-    ap.add_argument("--against", nargs="+", default=["embree", "nah+wide"])
+    ap.add_argument("--against", nargs="+", default=["direct:embree", "embree", "nah+wide8"])
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--clock", choices=sorted(CLOCKS), default="cpu")
     ap.add_argument("--json")
     args = ap.parse_args(argv)
     installed = set(raysort.available("traversals"))
-    configs = [c for c in args.configs if parse_config(c)[1] in installed]
+    configs = [c for c in args.configs if parse_config(c)[1].partition(":")[0] in installed
+               and not (args.kinds == ["frame"] and parse_config(c)[0] is None)]
     for c in sorted(set(args.configs) - set(configs)):
         print(f"skipping {c}: traversal not installed", file=sys.stderr)
     info = machine()

@@ -3,7 +3,7 @@
 Declares the layout facts of ``raysort/include/raysort/types.h`` (their one owner:
 structs, row enums, limits) and the shared
 numeric kernels of ``raysort/include/raysort/simd.h`` (the one SIMD header) and
-the 8-lane kernels of ``raysort/include/raysort/wide8.h``.
+the 8-lane kernels of ``raysort/include/raysort/wide8.h`` (and ``wide16.h``'s node test).
 An outside plugin compiled with ``include_dirs=[raysort.get_include()]`` can
 ``from raysort._types cimport rs_rays, rs_box4`` and use exactly the arithmetic
 the built-in traversals use.
@@ -64,6 +64,13 @@ cdef extern from "raysort/types.h" nogil:
         int32_t child[8]    # >= 0 inner node8, < 0 leaf: groups from -child - 1
         uint16_t count[8]   # rs_tri8 groups of a leaf child, 0 otherwise
         int32_t pad[4]
+
+    ctypedef struct rs_node16:
+        float lo[3][16]     # lo[axis][child]
+        float hi[3][16]
+        int32_t child[16]   # >= 0 inner node16, < 0 leaf: rs_tri8 groups from -child - 1
+        uint16_t count[16]  # rs_tri8 groups of a leaf child, 0 otherwise
+        int32_t pad[8]
 
     ctypedef struct rs_tri8:
         float v0[3][8]      # v0[axis][lane]
@@ -145,3 +152,8 @@ cdef extern from "raysort/wide8.h" nogil:
     int rs_node8_hit(const rs_rays *r, int i, const rs_ray8 *ray, const rs_node8 *n,
                      float entry[8])
     int rs_tri8_hit(rs_rays *r, int i, const rs_ray8 *ray, const rs_tri8 *g, int any_hit)
+
+
+cdef extern from "raysort/wide16.h" nogil:
+    int rs_node16_hit(const rs_rays *r, int i, const rs_ray8 *ray, const rs_node16 *n,
+                      float entry[16])

@@ -14,15 +14,16 @@ from typing import NamedTuple
 
 import numpy as np
 
-from raysort import _bvh
-from raysort._layout import NODE4_DTYPE, NODE8_DTYPE, NODE_DTYPE, TRI8_DTYPE, TRI_DTYPE
+from raysort import _bvh, _widen
+from raysort._layout import (NODE4_DTYPE, NODE8_DTYPE, NODE16_DTYPE, NODE_DTYPE, TRI8_DTYPE,
+                             TRI_DTYPE)
 from raysort.errors import ConfigError
 from raysort.mesh import check_mesh
 from raysort.params import integer, number
 from raysort.rays import aligned_empty
 
-__all__ = ["BVH", "Wide8", "PRESETS", "NODE_DTYPE", "NODE4_DTYPE", "NODE8_DTYPE", "TRI_DTYPE",
-           "TRI8_DTYPE", "prepare_triangles", "degenerate_faces"]
+__all__ = ["BVH", "Wide8", "Wide16", "PRESETS", "NODE_DTYPE", "NODE4_DTYPE", "NODE8_DTYPE",
+           "NODE16_DTYPE", "TRI_DTYPE", "TRI8_DTYPE", "prepare_triangles", "degenerate_faces"]
 
 #: named sets of build parameters (``BVH(..., preset="manta")``, ``bvh={"preset": "manta"}``,
 #: ``raysort bench --bvh manta``); parameters given next to a preset override it.
@@ -44,6 +45,16 @@ class Wide8(NamedTuple):
     depth: int              #: levels of 8-wide nodes
     sah_cost: float         #: SAH cost (node test 1, one 8-triangle group test GROUP_COST)
     build_seconds: float    #: time the collapse took
+
+
+class Wide16(NamedTuple):
+    """The 8-wide BVH widened to 16-wide nodes (``BVH.wide16``, for the ``wide16``
+    traversal); its leaves are the 8-wide tree's triangle groups."""
+
+    nodes: np.ndarray       #: NODE16_DTYPE, root first, 64-byte aligned
+    groups: np.ndarray      #: the 8-wide tree's TRI8_DTYPE groups (the same array)
+    depth: int              #: levels of 16-wide nodes
+    build_seconds: float    #: time the widening took (after the 8-wide collapse)
 
 
 def prepare_triangles(vertices, faces):
@@ -127,6 +138,7 @@ class BVH:
         self._update_bounds()
         self._wide = None
         self._wide8 = None
+        self._wide16 = None
         self._wide_lock = threading.Lock()
 
     @staticmethod
@@ -162,6 +174,20 @@ class BVH:
             if self._wide8 is None:
                 self._wide8 = self.collapse8()
             return self._wide8
+
+    @property
+    def wide16(self):
+        """The 8-wide tree widened to 16-wide nodes (:class:`Wide16`), built on first use."""
+        wide8 = self.wide8
+        with self._wide_lock:
+            if self._wide16 is None or self._wide16.groups is not wide8.groups:
+                start = time.perf_counter()
+                nodes = aligned_empty((len(wide8.nodes),), NODE16_DTYPE, 64)
+                n, depth = _widen.widen16(wide8.nodes.view(np.uint8).reshape(-1),
+                                          nodes.view(np.uint8).reshape(-1))
+                self._wide16 = Wide16(nodes[:n], wide8.groups, depth,
+                                      time.perf_counter() - start)
+            return self._wide16
 
     def collapse8(self, group_cost=None, max_leaf=None):
         """The tree collapsed to 8-wide nodes (:class:`Wide8`) with the given SAH cost of a

@@ -398,19 +398,42 @@ def gather_checked(rays, order, offsets, packets, keep_tmax=False, check_order=T
 
 def scatter(packets, n, hits=None):
     """Copy the closest hits of ``packets`` back to batch order (a new or given :class:`Hits`)."""
-    hits = Hits(n) if hits is None else hits
-    if not isa.module("_gather").scatter(packets.rows, packets.prim, packets.u, packets.v,
-                                         packets.index, hits.t, hits.prim, hits.u, hits.v):
+    hits, ok = _scatter(packets, n, False, hits=hits)
+    if not ok:
         raise ValueError(f"scatter: packets.index holds a ray beyond the {len(hits)} hits")
     return hits
 
 
 def scatter_occluded(packets, n):
     """For an any-hit query: a bool array, True where the ray found any hit."""
-    occluded = np.zeros(n, dtype=np.uint8)
-    if not isa.module("_gather").scatter_occluded(packets.prim, packets.index, occluded):
+    occluded, ok = _scatter(packets, n, True)
+    if not ok:
         raise ValueError(f"scatter_occluded: packets.index holds a ray beyond the {n} rays")
-    return occluded.view(bool)
+    return occluded
+
+
+def _scatter(packets, n, any_hit, unwritten=False, hits=None):
+    """The hits (a :class:`Hits`, or a bool array with ``any_hit``) of ``packets``'s lanes
+    in batch order, and False if a lane's index lies beyond ``n``.  With ``unwritten``, a
+    ray no lane was scattered to keeps the gather's sentinel (see :func:`_unwritten`)."""
+    kernels = isa.module("_gather")
+    if any_hit:
+        out = np.full(n, kernels.UNWRITTEN_FLAG if unwritten else 0, dtype=np.uint8)
+        ok = kernels.scatter_occluded(packets.prim, packets.index, out)
+        return out.view(bool), ok
+    out = Hits(n, kernels.UNWRITTEN_PRIM if unwritten else -1) if hits is None else hits
+    ok = kernels.scatter(packets.rows, packets.prim, packets.u, packets.v, packets.index,
+                         out.t, out.prim, out.u, out.v)
+    return out, ok
+
+
+def _unwritten(out):
+    """Whether :func:`_scatter` with ``unwritten`` left a ray out (a sorter's order that
+    names some ray twice)."""
+    kernels = isa.module("_gather")
+    if isinstance(out, Hits):
+        return kernels.unwritten(out.prim, None)
+    return kernels.unwritten(None, out.view(np.uint8))
 
 
 def scatter_checked(packets, order, offsets, tmax, n_prim, any_hit, *, check_hits=True,
@@ -426,7 +449,7 @@ def scatter_checked(packets, order, offsets, tmax, n_prim, any_hit, *, check_hit
     Returns ``(out, fault)``: the :class:`Hits` (with ``any_hit``, the bool array of
     occluded rays) and None, or None and ``"hits"`` (the traversal broke its contract)
     or ``"order"`` (the sorter's order is not a permutation)."""
-    kernels, n = isa.module("_gather"), len(order)
+    n = len(order)
     if check_hits:
         try:
             code, _ = isa.module("_contract").hits(
@@ -437,19 +460,10 @@ def scatter_checked(packets, order, offsets, tmax, n_prim, any_hit, *, check_hit
             code = 1
         if code:
             return None, "hits"
-    if any_hit:
-        out = np.full(n, kernels.UNWRITTEN_FLAG if check_order else 0, dtype=np.uint8)
-        ok = kernels.scatter_occluded(packets.prim, packets.index, out)
-        left = check_order and kernels.unwritten(None, out)
-        out = out.view(bool)
-    else:
-        out = Hits(n, kernels.UNWRITTEN_PRIM if check_order else -1)
-        ok = kernels.scatter(packets.rows, packets.prim, packets.u, packets.v, packets.index,
-                             out.t, out.prim, out.u, out.v)
-        left = check_order and kernels.unwritten(out.prim, None)
+    out, ok = _scatter(packets, n, any_hit, unwritten=check_order)
     if not ok:                                  # an index beyond the batch
         return None, "hits"
-    return (None, "order") if left else (out, None)
+    return (None, "order") if check_order and _unwritten(out) else (out, None)
 
 
 def add_unoccluded(radiance, slot, contribution, occluded):

@@ -15,9 +15,10 @@ PINNED = {      # struct: (itemsize, {field: offset})
     "rs_tri": (48, {"v0": 0, "e1": 12, "e2": 24, "id": 36, "pad": 40}),
     "rs_node8": (256, {"lo": 0, "hi": 96, "child": 192, "count": 224, "pad": 240}),
     "rs_tri8": (320, {"v0": 0, "e1": 96, "e2": 192, "id": 288}),
+    "rs_node16": (512, {"lo": 0, "hi": 192, "child": 384, "count": 448, "pad": 480}),
 }
 DTYPES = {"rs_node": bvh.NODE_DTYPE, "rs_node4": bvh.NODE4_DTYPE, "rs_tri": bvh.TRI_DTYPE,
-          "rs_node8": bvh.NODE8_DTYPE, "rs_tri8": bvh.TRI8_DTYPE}
+          "rs_node8": bvh.NODE8_DTYPE, "rs_tri8": bvh.TRI8_DTYPE, "rs_node16": bvh.NODE16_DTYPE}
 
 
 @pytest.mark.parametrize("struct", sorted(PINNED))

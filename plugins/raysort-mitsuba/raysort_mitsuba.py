@@ -13,7 +13,7 @@ import weakref
 
 import numpy as np
 
-from raysort.sdk import LibraryTraversal
+from raysort.sdk import LibraryTraversal, boolean
 
 __all__ = ["MitsubaTraversal", "VARIANT"]
 
@@ -58,9 +58,11 @@ def _scene(bvh):
         return scene
 
 
-def _query(scene, o, d, far, any_hit):
+def _query(scene, o, d, far, any_hit, coherent=False):
     """(t, prim, u, v) of rays from ``o`` (t relative to it; inf and -1 on a miss)."""
     mi = _mitsuba()
+    import drjit as dr
+
     ray = mi.Ray3f(mi.Point3f(*(mi.Float(o[:, k]) for k in range(3))),
                    mi.Vector3f(*(mi.Float(d[:, k]) for k in range(3))))
     ray.maxt = mi.Float(far)
@@ -68,7 +70,10 @@ def _query(scene, o, d, far, any_hit):
         hit = np.asarray(scene.ray_test(ray), bool)
         return np.where(hit, np.float32(np.nan), np.float32(np.inf)), \
             np.where(hit, 0, -1).astype(np.int32), None, None
-    pi = scene.ray_intersect_preliminary(ray, coherent=False)
+    pi = scene.ray_intersect_preliminary(ray, coherent=coherent)
+    # one kernel for all three outputs: each conversion of an unevaluated Dr.Jit
+    # array would otherwise run the whole ray query again
+    dr.eval(pi.t, pi.prim_index, pi.prim_uv)
     t = np.asarray(pi.t, np.float32)
     hit = np.isfinite(t)
     prim = np.where(hit, np.asarray(pi.prim_index, np.int64), -1).astype(np.int32)
@@ -89,12 +94,18 @@ class MitsubaTraversal(LibraryTraversal):
     ==========  ======  =======  ==========================================
     parameter   type    default  meaning
     ==========  ======  =======  ==========================================
-    (none)
+    coherent    bool    false    tell Mitsuba the rays are coherent (as its
+                                 integrators do for camera rays: Embree's
+                                 coherent query mode, about twice as fast
+                                 on them); closest-hit queries only
     ==========  ======  =======  ==========================================
     """
+
+    def __init__(self, *, coherent=False):
+        self.coherent = boolean("coherent", coherent)
 
     def scene(self, bvh):
         return _scene(bvh)
 
     def query(self, scene, origins, directions, far, any_hit):
-        return _query(scene, origins, directions, far, any_hit)
+        return _query(scene, origins, directions, far, any_hit, self.coherent)

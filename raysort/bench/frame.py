@@ -11,20 +11,11 @@ from __future__ import annotations
 import numpy as np
 
 from raysort.bench.report import group_report, load_average, machine_info
-from raysort.bench.rounds import run_rounds
+from raysort.bench.rounds import run_checked
 from raysort.pipeline import Pipeline
 from raysort.scene import load_scene
 
-__all__ = ["run_frames", "reference_index"]
-
-
-def reference_index(configs, runs):
-    """The configuration every other is checked against: the baseline if its traversal
-    is exact, else the first exact one."""
-    base = next((k for k, c in enumerate(configs) if c.label == configs[0].baseline), 0)
-    if not runs[base].exact:
-        base = next((k for k, r in enumerate(runs) if r.exact), base)
-    return base
+__all__ = ["run_frames"]
 
 
 class _Frame:
@@ -40,6 +31,10 @@ class _Frame:
 
     def render(self):
         return self.pipe.render(*self.size, self.spp, self.seed)
+
+    def result(self):
+        """The image, as the reference the other configurations are checked against."""
+        return self.render().image
 
     def __call__(self):
         out = self.render()
@@ -72,16 +67,9 @@ def run_frames(scene_specs, configs, table, *, width=256, height=256, spp=4, dep
                                   traversal=c.traversal, sorter=c.sorter),
                          (width, height), spp, seed) for c in configs]
 
-        reference = frames[reference_index(configs, frames)].render().image
-        for f in frames:
-            f.reference = reference
-
-        def tick(done, total, s=s):
-            if progress:
-                progress(s * total + done, len(scene_specs) * total)
-
-        seconds, orders = run_rounds(frames, repeat, seed=order_seed + s, warmup=warmup,
-                                     progress=tick)
+        seconds, orders = run_checked(configs, frames, repeat, seed=order_seed + s,
+                                      warmup=warmup, progress=progress, group=s,
+                                      groups=len(scene_specs))
         rows = []
         for f in frames:
             timed = f.stats[len(f.stats) - repeat:]

@@ -16,9 +16,8 @@ import time
 import numpy as np
 
 from raysort import registry
-from raysort.bench.frame import reference_index
 from raysort.bench.report import group_report, load_average, machine_info
-from raysort.bench.rounds import run_rounds
+from raysort.bench.rounds import run_checked
 from raysort.rays import gather, scatter, scatter_occluded
 from raysort.scene import load_scene
 from raysort.workloads import workload
@@ -38,7 +37,8 @@ class _Trace:
         self.reference, self.identical = None, True
         self.counters = None
 
-    def trace(self):
+    def result(self):
+        """The hits, as the reference the other configurations are checked against."""
         w = self.work
         order, offsets = self.sorter.sort(w.rays, w.packets.copy(), self.bvh.bounds.copy())
         packets = gather(w.rays, order, offsets)
@@ -85,16 +85,9 @@ def run_kernels(scene_specs, configs, kinds, *, width=256, height=256, spp=1, se
         built = scene.bvh(**(bvh or {}))
         work = workload(scene, kind, width=width, height=height, spp=spp, seed=seed)
         traces = [_Trace(c, built, work) for c in configs]
-        reference = traces[reference_index(configs, traces)].trace()
-        for t in traces:
-            t.reference = reference
-
-        def tick(done, total, j=j):
-            if progress:
-                progress(j * total + done, len(jobs) * total)
-
-        seconds, orders = run_rounds(traces, repeat, seed=order_seed + j, warmup=warmup,
-                                     progress=tick)
+        seconds, orders = run_checked(configs, traces, repeat, seed=order_seed + j,
+                                      warmup=warmup, progress=progress, group=j,
+                                      groups=len(jobs))
         rows = [{"exact_traversal": t.exact, "rays": len(work), "counters": t.counters,
                  "identical_hits": t.identical,
                  "sort_seconds": t.sort_seconds[len(t.sort_seconds) - repeat:]}

@@ -21,7 +21,32 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["run_rounds", "summary", "ratios"]
+__all__ = ["run_rounds", "run_checked", "reference_index", "summary", "ratios"]
+
+
+def reference_index(configs, runs):
+    """The configuration every other is checked against: the baseline if its traversal
+    is exact, else the first exact one."""
+    base = next((k for k, c in enumerate(configs) if c.label == configs[0].baseline), 0)
+    if not runs[base].exact:
+        base = next((k for k, r in enumerate(runs) if r.exact), base)
+    return base
+
+
+def run_checked(configs, runs, repeat, *, seed, warmup, progress, group, groups):
+    """:func:`run_rounds` of one group (a scene, or a scene and a workload) of
+    ``groups``, each run's ``reference`` set first to the result (``run.result()``) of
+    the configuration :func:`reference_index` picks; ``progress(done, total)`` counts
+    over all groups."""
+    reference = runs[reference_index(configs, runs)].result()
+    for run in runs:
+        run.reference = reference
+
+    def tick(done, total):
+        if progress:
+            progress(group * total + done, groups * total)
+
+    return run_rounds(runs, repeat, seed=seed, warmup=warmup, progress=tick)
 
 
 def run_rounds(runs, repeat, *, seed=0, warmup=True, progress=None):

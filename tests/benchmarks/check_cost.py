@@ -13,10 +13,12 @@ The checks of a sorter's order, of the rays and of a traversal's hits run inside
 gather and the scatter, so the pipeline's own ``check`` stage timer sees only the rest
 (shown too); the on/off difference is the whole cost.  It is a per cent or two of a
 frame, less than the noise of a shared machine, so the script also replays every
-gather and scatter call of one checked frame with and without its checks, interleaved
-call by call, and reports their difference as a share of that frame's CPU (warm caches:
-the checks read what the gather and scatter read anyway, so the extra is mostly
-arithmetic).  Run it on an otherwise idle machine and read the spreads.
+gather and scatter call of a checked frame with and without its checks, several times
+each, the settings alternating, keeps the fastest replay of each call and setting, and
+reports the difference of their sums as a share of the fastest checked frame's CPU
+(warm caches: the checks read what the gather and scatter read anyway, so the extra is
+mostly arithmetic); one such frame per round.  Run it on an otherwise idle machine and
+read the spreads.
 
 For a count of instructions instead (stable on a noisy machine), render under
 callgrind with the checks on or off, once and twice; the frame is the difference:
@@ -28,6 +30,7 @@ import argparse
 import statistics
 import time
 
+from raysort import contract
 from raysort import pipeline as pipeline_module
 from raysort import rays as rays_module
 from raysort.bench.report import machine_info
@@ -35,10 +38,14 @@ from raysort.pipeline import Pipeline
 from raysort.scene import load_scene
 
 
+STAND_ALONE = ("sort_arrays", "check_generated", "check_bounce")   # the 'check' stage
+
+
 def captured_frame(pipe, size, spp):
-    """Render one frame, recording the arguments of every gather and scatter call;
-    returns (frame CPU seconds, [(gather args, scatter args)])."""
-    calls, gathered = [], {}
+    """Render one frame, recording the arguments of every gather and scatter call and of
+    every stand-alone check (:data:`STAND_ALONE`); returns (frame CPU seconds,
+    [(gather args, scatter args)], [(check function, args, keyword args)])."""
+    calls, checks, gathered = [], [], {}
 
     def gather(rays, order, offsets, packets, **options):
         gathered["last"] = (rays, order, offsets, packets)
@@ -49,40 +56,70 @@ def captured_frame(pipe, size, spp):
         return rays_module.scatter_checked(batch, order, offsets, tmax, n_prim, any_hit,
                                            **options)
 
+    def recorded(check):
+        def call(*args, **kwargs):
+            checks.append((check, args, kwargs))
+            return check(*args, **kwargs)
+        return call
+
     real = pipeline_module.gather_checked, pipeline_module.scatter_checked
+    real_checks = {name: getattr(contract, name) for name in STAND_ALONE}
     pipeline_module.gather_checked, pipeline_module.scatter_checked = gather, scatter
+    for name, check in real_checks.items():
+        setattr(contract, name, recorded(check))
     try:
         start = time.thread_time()
         pipe.render(size, size, spp)
-        return time.thread_time() - start, calls
+        return time.thread_time() - start, calls, checks
     finally:
         pipeline_module.gather_checked, pipeline_module.scatter_checked = real
+        for name, check in real_checks.items():
+            setattr(contract, name, check)
 
 
-def replay(calls, checked):
-    """Thread-CPU seconds of the frame's gathers and scatters, with or without checks."""
-    spent = 0.0
-    for (rays, order, offsets, packets), (batch, tmax, n_prim, any_hit) in calls:
+def fastest(call, reps):
+    """The least thread-CPU seconds of ``reps`` runs of ``call()``."""
+    best = float("inf")
+    for _ in range(reps):
         start = time.thread_time()
-        rays_module.gather_checked(rays, order, offsets, packets,
-                                   keep_tmax=checked and not any_hit, check_order=checked)
-        rays_module.scatter_checked(batch, order, offsets, tmax, n_prim, any_hit,
-                                    check_hits=checked, check_order=checked)
-        spent += time.thread_time() - start
-    return spent
+        call()
+        best = min(best, time.thread_time() - start)
+    return best
 
 
-def fused_share(pipe, size, spp, rounds):
-    """The fused checks' extra CPU as a share of a frame (replayed, per round)."""
-    frame, calls = captured_frame(pipe, size, spp)
-    shares = []
-    for r in range(rounds + 1):
-        pair = {}
-        for checked in ((True, False) if r % 2 else (False, True)):
-            pair[checked] = replay(calls, checked)
-        if r:
-            shares.append(100 * (pair[True] - pair[False]) / frame)
-    return shares
+def replay(calls, checks, reps):
+    """Thread-CPU seconds the frame's checks take, replayed: each gather and scatter
+    call ``reps`` times with and without its checks, the settings alternating call by
+    call, and each stand-alone check ``reps`` times; the fastest run of each call and
+    setting is kept (a shared machine's noise only ever adds time, so the minimum is
+    the stable estimate).  Returns (fused checks' extra seconds, stand-alone seconds)."""
+    spent = {True: 0.0, False: 0.0}
+    for (rays, order, offsets, packets), (batch, tmax, n_prim, any_hit) in calls:
+        best = {True: float("inf"), False: float("inf")}
+        for rep in range(reps):
+            for checked in ((True, False) if rep % 2 else (False, True)):
+                start = time.thread_time()
+                rays_module.gather_checked(rays, order, offsets, packets,
+                                           keep_tmax=checked and not any_hit,
+                                           check_order=checked)
+                rays_module.scatter_checked(batch, order, offsets, tmax, n_prim, any_hit,
+                                            check_hits=checked, check_order=checked)
+                best[checked] = min(best[checked], time.thread_time() - start)
+        for checked in best:
+            spent[checked] += best[checked]
+    alone = sum(fastest(lambda: check(*args, **kwargs), reps) for check, args, kwargs in checks)
+    return spent[True] - spent[False], alone
+
+
+def check_shares(pipe, size, spp, rounds, reps):
+    """Per round, the fused and the stand-alone checks' CPU as shares of a frame
+    (replayed), the frame being the fastest of the ``rounds`` checked renders."""
+    frames, spent = [], []
+    for _ in range(rounds):
+        frame, calls, checks = captured_frame(pipe, size, spp)
+        frames.append(frame)
+        spent.append(replay(calls, checks, reps))
+    return [(100 * fused / min(frames), 100 * alone / min(frames)) for fused, alone in spent]
 
 
 def main():
@@ -91,6 +128,8 @@ def main():
     parser.add_argument("--size", type=int, default=256, help="image edge in pixels (256)")
     parser.add_argument("--spp", type=int, default=16, help="samples per pixel (16)")
     parser.add_argument("--rounds", type=int, default=7, help="timed rounds (7)")
+    parser.add_argument("--reps", type=int, default=5,
+                        help="replays of each gather and scatter call per setting (5)")
     parser.add_argument("--only", choices=("on", "off"),
                         help="just render with the checks on or off (for callgrind)")
     parser.add_argument("--renders", type=int, default=1, help="frames to render with --only")
@@ -127,14 +166,16 @@ def main():
     print(f"  extra CPU with checks: median {statistics.median(extra):+.2f} % "
           f"[{min(extra):+.2f} .. {max(extra):+.2f}] (per round: "
           f"{', '.join(f'{x:+.1f}' for x in extra)})")
-    print(f"  'check' stage alone: {100 * statistics.median(check_stage):.2f} % of the frame")
-    shares = fused_share(pipes["on"], args.size, args.spp, args.rounds)
-    print(f"  checks inside gather and scatter (replayed): median "
-          f"{statistics.median(shares):.2f} % of the frame [{min(shares):.2f} .. "
-          f"{max(shares):.2f}]")
-    print(f"  => checks in all: {100 * statistics.median(check_stage) + statistics.median(shares):.2f} "
-          f"% of the frame ('check' stage + fused)")
-
+    print(f"  'check' stage timer: {100 * statistics.median(check_stage):.2f} % of the frame "
+          f"(with the first Python after a kernel, cold in cache, that would run anyway)")
+    shares = check_shares(pipes["on"], args.size, args.spp, args.rounds, args.reps)
+    fused, alone = ([share[k] for share in shares] for k in (0, 1))
+    total = [f + a for f, a in shares]
+    print(f"  replayed, each call {args.reps}x per setting, fastest kept, per round:")
+    for label, values in (("inside gather and scatter", fused), ("stand-alone", alone),
+                          ("=> checks in all", total)):
+        print(f"    {label:26s} median {statistics.median(values):.2f} % of the frame "
+              f"[{min(values):.2f} .. {max(values):.2f}]")
 
 if __name__ == "__main__":
     main()

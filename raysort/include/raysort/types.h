@@ -101,6 +101,19 @@ typedef struct rs_node8 {
     int32_t pad[4];     /* 0 */
 } rs_node8;
 
+/* A node of the 16-wide BVH widened from the 8-wide one (for the `wide16`
+ * traversal): 512 bytes, the same layout as rs_node8 with sixteen slots, so one
+ * AVX-512 operation tests a ray against all sixteen child boxes.  Leaf children
+ * point into the 8-wide tree's rs_tri8 groups; an empty slot has lo = +inf,
+ * hi = -inf. */
+typedef struct rs_node16 {
+    float lo[3][16];    /* lo[axis][child] */
+    float hi[3][16];    /* hi[axis][child] */
+    int32_t child[16];  /* inner node16 index (>= 0) or -(first group) - 1 (leaf) */
+    uint16_t count[16]; /* rs_tri8 groups of a leaf child, 0 otherwise */
+    int32_t pad[8];     /* 0 */
+} rs_node16;
+
 /* Up to eight triangles of one leaf, structure-of-arrays, prepared for
  * Moller-Trumbore so one 8-lane test checks a ray against all of them: 320
  * bytes.  Lane k holds the rs_tri fields of one triangle; an unused lane has

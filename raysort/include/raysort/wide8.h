@@ -96,22 +96,30 @@ RS_INLINE void rs_ray8_load(const rs_rays *r, int i, rs_ray8 *ray)
     }
 }
 
-/* One ray (lane i of r, broadcast in `ray`) against the eight child boxes of a
- * node: returns the 8-bit mask of children hit and stores where the ray
- * enters each in entry[].  Lane k performs exactly rs_box1's operations on
- * child k's box, so the decision equals a scalar slab test's. */
-RS_INLINE int rs_node8_hit(const rs_rays *r, int i, const rs_ray8 *ray, const rs_node8 *n,
-                           float entry[8])
+/* One ray (lane i of r, broadcast in `ray`) against eight boxes stored
+ * structure-of-arrays, axis a's minima at lo + a * stride (maxima likewise):
+ * returns the 8-bit mask of boxes hit and stores where the ray enters each in
+ * entry[].  Lane k performs exactly rs_box1's operations on box k, so the
+ * decision equals a scalar slab test's.  lo and hi are 32-byte aligned. */
+RS_INLINE int rs_boxes8_hit(const rs_rays *r, int i, const rs_ray8 *ray, const float *lo,
+                            const float *hi, int stride, float entry[8])
 {
     rs_v8f tn = rs8_set1(r->tmin[i]), tf = rs8_set1(r->t[i]);
     for (int a = 0; a < 3; ++a) {
-        rs_v8f near_plane = rs8_load(ray->neg[a] ? n->hi[a] : n->lo[a]);
-        rs_v8f far_plane = rs8_load(ray->neg[a] ? n->lo[a] : n->hi[a]);
+        rs_v8f near_plane = rs8_load((ray->neg[a] ? hi : lo) + a * stride);
+        rs_v8f far_plane = rs8_load((ray->neg[a] ? lo : hi) + a * stride);
         tn = rs8_max(rs8_mul(rs8_sub(near_plane, ray->o[a]), ray->inv[a]), tn);
         tf = rs8_min(rs8_mul(rs8_sub(far_plane, ray->o[a]), ray->inv[a]), tf);
     }
     rs8_store(entry, tn);
     return rs8_movemask(rs8_le(tn, rs8_mul(tf, rs8_set1(RS_BOX_SLACK))));
+}
+
+/* The eight child boxes of a node (rs_boxes8_hit). */
+RS_INLINE int rs_node8_hit(const rs_rays *r, int i, const rs_ray8 *ray, const rs_node8 *n,
+                           float entry[8])
+{
+    return rs_boxes8_hit(r, i, ray, &n->lo[0][0], &n->hi[0][0], 8, entry);
 }
 
 /* One ray against the eight triangles of a group (Moller-Trumbore, two-sided,

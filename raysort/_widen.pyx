@@ -1,0 +1,125 @@
+"""Widen the 8-wide BVH to 16-wide nodes (``BVH.wide16``, for the ``wide16`` traversal).
+
+Each 16-wide node starts from an 8-wide node's children and opens its inner
+children, largest surface area first, into their own children while the sixteen
+slots hold them (the greedy widening of Wald et al.'s wide BVHs).  Every slot
+keeps a box of the 8-wide tree as it is, and leaves keep its rs_tri8 groups, so a
+ray meets the same leaf boxes as in the 8-wide tree, each behind fewer nodes.
+"""
+from libc.math cimport INFINITY
+from libc.stdint cimport int32_t
+from libc.stdlib cimport malloc, free
+from raysort._types cimport rs_node8, rs_node16
+
+cdef enum:
+    WIDTH8 = 8
+    WIDTH16 = 16
+
+
+cdef inline double slot_area(const float *lo, const float *hi, int k, int stride) noexcept nogil:
+    """Half the surface area of the box of slot ``k`` (``lo[a * stride + k]``)."""
+    cdef double dx = hi[k] - lo[k]
+    cdef double dy = hi[stride + k] - lo[stride + k]
+    cdef double dz = hi[2 * stride + k] - lo[2 * stride + k]
+    return dx * dy + dy * dz + dz * dx
+
+
+cdef int widen_nodes(const rs_node8 *nodes8, int n8, rs_node16 *out, int *depth) except -1 nogil:
+    """Write the 16-wide tree (root first, children after parents) into ``out``, which
+    needs room for ``n8`` nodes; returns the number of nodes written."""
+    cdef int *work = <int *> malloc(2 * (n8 + 1) * sizeof(int))   # (node8, node16) pairs
+    cdef int *level
+    cdef int sp, src, dst, m, k, j, a, best, kids, n_out = 1, ref
+    cdef double area, best_area
+    cdef int32_t child[WIDTH16]
+    cdef unsigned short count[WIDTH16]
+    cdef float lo[3][WIDTH16]
+    cdef float hi[3][WIDTH16]
+    cdef const rs_node8 *n
+    cdef rs_node16 *o
+    if work == NULL:
+        with gil:
+            raise MemoryError()
+    work[0] = 0
+    work[1] = 0
+    sp = 1
+    while sp > 0:
+        sp -= 1
+        src = work[2 * sp]
+        dst = work[2 * sp + 1]
+        m = 0                                   # the node8's used slots (child != 0)
+        n = &nodes8[src]
+        for k in range(WIDTH8):
+            if n.child[k] != 0:
+                child[m], count[m] = n.child[k], n.count[k]
+                for a in range(3):
+                    lo[a][m], hi[a][m] = n.lo[a][k], n.hi[a][k]
+                m += 1
+        while True:                             # open the largest inner slot that fits
+            best, best_area = -1, -1.0
+            for k in range(m):
+                if child[k] > 0:
+                    kids = 0
+                    for j in range(WIDTH8):
+                        kids += nodes8[child[k]].child[j] != 0
+                    area = slot_area(&lo[0][0], &hi[0][0], k, WIDTH16)
+                    if m - 1 + kids <= WIDTH16 and area > best_area:
+                        best, best_area = k, area
+            if best < 0:
+                break
+            n = &nodes8[child[best]]
+            m -= 1                              # the last slot moves into the opened one
+            child[best], count[best] = child[m], count[m]
+            for a in range(3):
+                lo[a][best], hi[a][best] = lo[a][m], hi[a][m]
+            for j in range(WIDTH8):
+                if n.child[j] != 0:
+                    child[m], count[m] = n.child[j], n.count[j]
+                    for a in range(3):
+                        lo[a][m], hi[a][m] = n.lo[a][j], n.hi[a][j]
+                    m += 1
+        o = &out[dst]
+        for k in range(WIDTH16):
+            for a in range(3):
+                o.lo[a][k] = lo[a][k] if k < m else INFINITY
+                o.hi[a][k] = hi[a][k] if k < m else -INFINITY
+            o.count[k] = count[k] if k < m else 0
+            o.child[k] = 0
+        for k in range(8):
+            o.pad[k] = 0
+        for k in range(m):
+            if child[k] < 0:
+                o.child[k] = child[k]
+            else:
+                o.child[k] = n_out
+                work[2 * sp] = child[k]
+                work[2 * sp + 1] = n_out
+                sp += 1
+                n_out += 1
+    free(work)
+    level = <int *> malloc(n_out * sizeof(int))
+    if level == NULL:
+        with gil:
+            raise MemoryError()
+    level[0] = 1
+    depth[0] = 1
+    for dst in range(n_out):
+        for k in range(WIDTH16):
+            ref = out[dst].child[k]
+            if ref > 0:
+                level[ref] = level[dst] + 1
+                if level[ref] > depth[0]:
+                    depth[0] = level[ref]
+    free(level)
+    return n_out
+
+
+def widen16(unsigned char[::1] node8_bytes, unsigned char[::1] out_bytes):
+    """Widen 8-wide nodes into 16-wide ones; returns (nodes written, depth)."""
+    cdef int n8 = node8_bytes.shape[0] // sizeof(rs_node8), n_out, depth = 0
+    if n8 == 0 or out_bytes.shape[0] < n8 * sizeof(rs_node16):
+        raise ValueError("widen16: the 8-wide tree is empty or the output too small")
+    with nogil:
+        n_out = widen_nodes(<const rs_node8 *> &node8_bytes[0], n8,
+                            <rs_node16 *> &out_bytes[0], &depth)
+    return n_out, depth
