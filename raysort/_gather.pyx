@@ -1,18 +1,25 @@
 """Gather rays into aligned sub-packets and scatter hits back (nogil).
 
 The gather follows the paper's section 3: rays are read through the sorter's
-index order into a temporary 4-ray packet and written with 4-wide stores into
-16-byte aligned structure-of-arrays sub-packets, computing the inverse
-direction on the way (``rs_gather4`` in simd.h).
+index order and written with full-width SIMD stores into 16-byte aligned
+structure-of-arrays sub-packets, computing the inverse direction on the way
+(4 rays at a time as in the paper, 8 with AVX2 and 16 with AVX-512: gather.h).
 """
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.math cimport INFINITY
+from libc.string cimport memcpy
 from raysort._checks cimport offsets_bad, packet_bounds, range_bad
-from raysort._types cimport (rs_gather4, rs_isa_name, rs_prefetch, RS_MAX_PACKET,
-                             RS_RAY_ROWS, RS_PACKET_ROWS, RS_PACKET_TMIN, RS_PACKET_T)
+from raysort._types cimport (rs_isa_name, RS_MAX_PACKET, RS_RAY_ROWS, RS_PACKET_ROWS,
+                             RS_PACKET_T)
+
+
+cdef extern from "raysort/gather.h" nogil:
+    int64_t rs_gather_lanes(float *const dst[RS_PACKET_ROWS], int32_t *prim, float *u,
+                            float *v, float *tmax, const float *const src[RS_RAY_ROWS],
+                            const int32_t *index, int64_t capacity)
+
 
 cdef enum:
-    PREFETCH_AHEAD = 16     # rays (in the sorter's order) between a prefetch and its use
     UNWRITTEN = -2          # prim of a ray no lane was scattered to (see unwritten)
     UNWRITTEN_OCCLUDED = 2  # the same for an any-hit query's flags
 
@@ -28,6 +35,20 @@ def offsets_valid(const int32_t[::1] offsets, int32_t n, int32_t max_packet=RS_M
     return not bad
 
 
+def layout(const int32_t[::1] counts, int32_t[::1] starts):
+    """``starts[k]``: where sub-packet k of ``counts[k]`` rays starts, each at a multiple
+    of 4 after the one before; returns the lanes they take (at least 4)."""
+    cdef Py_ssize_t k
+    cdef int64_t lanes = 0
+    if starts.shape[0] != counts.shape[0]:
+        raise ValueError("layout: one start per sub-packet")
+    with nogil:
+        for k in range(counts.shape[0]):
+            starts[k] = <int32_t> lanes
+            lanes += (<int64_t> counts[k] + 3) & ~3
+    return max(lanes, 4)
+
+
 def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1] offsets,
            const int32_t[::1] starts, float[:, ::1] dst, int32_t[::1] prim, float[::1] u,
            float[::1] v, int32_t[::1] index, const int32_t[::1] packets, float[::1] t0=None,
@@ -40,21 +61,35 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
     (:func:`offsets_valid`), ``len(order) == n``, and ``starts``/``dst``/... sized for
     them.  With ``t0``, the row ``t`` as gathered (each ray's tmax) is written there too.
 
+    Two passes: the order is laid out lane by lane into ``index`` (checked on the way),
+    then every lane's rows are gathered from it, as wide as the ISA allows
+    (``rs_gather_lanes`` in gather.h).
+
     Returns ``(order_ok, bad_ray)``: ``order_ok`` is False at the first sub-packet that
     breaks the order contract (the gather stops there); ``bad_ray`` is a ray that breaks
     the ray contract (active, yet tmin < 0 or not finite; stored inactive), or -1.
     """
-    cdef Py_ssize_t n_packets = starts.shape[0], k, k_big = 0, j, count, base, s, ahead
+    cdef Py_ssize_t n_packets = starts.shape[0], capacity = dst.shape[1], k, k_big = 0, j
+    cdef Py_ssize_t count, base, s, end = 0
     cdef Py_ssize_t checked = 0     # sub-packets before it: order checked
     cdef int32_t n = order.shape[0]
     cdef const float *src_rows[RS_RAY_ROWS]
     cdef float *dst_rows[RS_PACKET_ROWS]
-    cdef int32_t idx[4]
-    cdef int c, lane, bad_lanes, order_bad = 0
-    cdef int32_t bad_ray = -1, lo = 0, hi = 0
+    cdef int c, order_bad = 0
+    cdef int64_t bad_lane = -1
+    cdef int32_t lo = 0, hi = 0
     cdef float *tmax = NULL
+    if src.shape[0] != RS_RAY_ROWS or dst.shape[0] != RS_PACKET_ROWS or src.shape[1] < max(n, 1):
+        raise ValueError("gather: src must hold the ray rows of the n rays, dst the packet rows")
+    if (prim.shape[0] != capacity or u.shape[0] != capacity or v.shape[0] != capacity
+            or index.shape[0] != capacity or offsets.shape[0] != n_packets + 1):
+        raise ValueError("gather: prim, u, v and index must hold one value per lane, "
+                         "offsets one more than starts")
+    if n_packets and starts[n_packets - 1] + ((offsets[n_packets] - offsets[n_packets - 1] + 3)
+                                             & ~3) > capacity:
+        raise ValueError("gather: the last sub-packet ends beyond the lanes")
     if t0 is not None:
-        if t0.shape[0] != dst.shape[1]:
+        if t0.shape[0] != capacity:
             raise ValueError("t0 must hold one value per lane")
         tmax = &t0[0]
     for c in range(RS_RAY_ROWS):
@@ -78,35 +113,25 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
                 if range_bad(&order[0], base, offsets[checked], lo, hi):
                     order_bad = 1
                     break
-            for j in range(0, count, 4):
-                # the rows of rays further on, which the order makes random accesses (a
-                # prefetch of a ray not checked yet reads nothing)
-                for lane in range(4):
-                    ahead = base + j + lane + PREFETCH_AHEAD
-                    if ahead < n and <uint32_t> order[ahead] < <uint32_t> n:
-                        for c in range(RS_RAY_ROWS):
-                            rs_prefetch(src_rows[c] + order[ahead])
-                for lane in range(4):
-                    idx[lane] = order[base + j + lane] if j + lane < count else -1
-                s = starts[k] + j
-                bad_lanes = rs_gather4(dst_rows, &prim[0], &u[0], &v[0], tmax, s, src_rows, idx)
-                if bad_lanes and bad_ray < 0:
-                    for lane in range(3, -1, -1):
-                        if bad_lanes & (1 << lane):
-                            bad_ray = idx[lane]
-                for lane in range(4):
-                    index[s + lane] = idx[lane]
+            s = starts[k]
+            if s < end:
+                order_bad = 1       # sub-packets overlap: starts do not fit offsets
+                break
+            end = s + ((count + 3) & ~3)
+            if not check_order and range_bad(&order[0], base, base + count, 0, n):
+                order_bad = 1       # a trusted order is not checked, but never read beyond n
+                break
+            memcpy(&index[s], &order[base], count * sizeof(int32_t))
+            for j in range(s + count, end):
+                index[j] = -1
         if not order_bad:
-            # lanes after the last sub-packet (an empty batch still has 4 lanes)
-            s = starts[n_packets - 1] + ((offsets[n_packets] - offsets[n_packets - 1] + 3) & ~3) \
-                if n_packets else 0
-            for j in range(s, dst.shape[1], 4):
-                for lane in range(4):
-                    idx[lane] = -1
-                rs_gather4(dst_rows, &prim[0], &u[0], &v[0], tmax, j, src_rows, idx)
-                for lane in range(4):
-                    index[j + lane] = -1
-    return not order_bad, bad_ray
+            for j in range(end, capacity):      # lanes after the last sub-packet
+                index[j] = -1
+            bad_lane = rs_gather_lanes(dst_rows, &prim[0], &u[0], &v[0], tmax, src_rows,
+                                       &index[0], capacity)
+    if order_bad:
+        return False, -1
+    return True, (index[bad_lane] if bad_lane >= 0 else -1)
 
 
 def scatter(const float[:, ::1] rows, const int32_t[::1] prim, const float[::1] u,

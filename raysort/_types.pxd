@@ -125,9 +125,6 @@ cdef extern from "raysort/simd.h" nogil:
     float RS_BOX_SLACK
     int rs_tri1(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
     int rs_tri4(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
-    int rs_gather4(float *const dst[RS_PACKET_ROWS], int32_t *prim, float *u, float *v,
-                   float *tmax, int j, const float *const src[RS_RAY_ROWS],
-                   const int32_t idx[4])
 
 
 cdef inline rs_rays rays_view(float[:, ::1] rows, int32_t[::1] prim, float[::1] u,

@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import math
 import numbers
+import sys
+import threading
 
 import numpy as np
 
@@ -69,6 +71,71 @@ def aligned_empty(shape, dtype, align=ALIGN):
     return raw[start:start + nbytes].view(dtype).reshape(shape)
 
 
+def _sole_count():
+    """What ``sys.getrefcount(blocks[i][0])`` says of an object only the pair in the list
+    ``blocks`` holds."""
+    blocks = [(object(), 0)]
+    return sys.getrefcount(blocks[0][0])
+
+
+class _Recycler(threading.local):
+    """Each thread's few most recent blocks of memory for :class:`RayBatch` and
+    :class:`Packets`.
+
+    A batch's rays and packets are large (92 bytes per ray) and short-lived: fresh
+    arrays would fault in their pages on first touch, batch after batch.  A block is
+    handed out again only when nothing but this pool refers to it, i.e. when every
+    array viewing it (a :class:`Packets`' rows, a caller's ray batch) is gone, so a
+    result never shares memory with a later batch's while anyone can still read it.
+    (Hits, 16 bytes per ray, come from the heap: recycling them did not pay.)
+    """
+
+    SOLE = _sole_count()
+    KEEP = 12           # blocks kept per thread, least recently used dropped first ...
+    BUDGET = 1 << 26    # ... and while they hold more bytes than this (64 MiB)
+    GRAIN = 1 << 16     # smaller blocks are not kept; sizes are rounded up to a multiple
+
+    def __init__(self):
+        self.blocks = []    # (uint8 array, offset of its first ALIGN-aligned byte), oldest first
+
+    def take(self, nbytes):
+        """An uninitialised ALIGN-aligned uint8 array of ``nbytes`` bytes."""
+        if nbytes < self.GRAIN:         # small: the heap has it at hand anyway
+            return aligned_empty((nbytes,), np.uint8)
+        blocks = self.blocks
+        want = nbytes + ALIGN
+        for i in range(len(blocks) - 1, -1, -1):
+            if want <= blocks[i][0].nbytes <= 2 * want + self.GRAIN \
+                    and sys.getrefcount(blocks[i][0]) == self.SOLE:
+                raw, start = blocks.pop(i)
+                break
+        else:
+            raw = np.empty(-(-want // self.GRAIN) * self.GRAIN, np.uint8)
+            start = (-raw.ctypes.data) % ALIGN
+            held = raw.nbytes + sum(block.nbytes for block, _ in blocks)
+            while blocks and (len(blocks) >= self.KEEP or held > self.BUDGET):
+                held -= blocks.pop(0)[0].nbytes
+        blocks.append((raw, start))
+        return raw[start:start + nbytes]
+
+
+_recycler = _Recycler()
+LINE = 64   # bytes of a cache line
+
+
+def _carve(*sizes):
+    """uint8 arrays of ``sizes`` bytes in one recycled block, each starting on a cache
+    line one line further round the cache than the one before, so that arrays of the
+    same length do not compete for the same cache sets when a kernel streams them
+    together (a length of a multiple of 4 kB would make them)."""
+    starts, end = [], 0
+    for k, size in enumerate(sizes):
+        starts.append(end)
+        end += -(-size // LINE) * LINE + LINE
+    block = _recycler.take(end)
+    return [block[start:start + size] for start, size in zip(starts, sizes)]
+
+
 class RayBatch:
     """``n`` rays as float32 rows ``ox oy oz dx dy dz tmin tmax`` (:class:`RayRow`).
 
@@ -90,7 +157,9 @@ class RayBatch:
         n = int(n)
         self.n = n
         self.prev_t = None
-        self.data = aligned_empty((len(RAY_ROWS), max(_round4(n), 4)), np.float32)
+        capacity = max(_round4(n), 4)
+        self.data = _recycler.take(len(RAY_ROWS) * capacity * 4).view(np.float32).reshape(
+            len(RAY_ROWS), capacity)
         self.data[:] = 0.0
         self.data[_TMIN, n:] = np.inf
         self.data[_TMAX, n:] = -np.inf
@@ -209,27 +278,26 @@ class Packets:
         the batch index of the ray in each lane, -1 for padding.
     """
 
-    __slots__ = ("rows", "prim", "u", "v", "starts", "counts", "index")
+    __slots__ = ("rows", "prim", "u", "v", "starts", "counts", "index", "_extra")
 
-    def __init__(self, counts):
-        counts = np.asarray(counts, dtype=np.int32)
-        padded = (counts.astype(np.int64) + 3) & ~3
-        self.counts = counts
-        self.starts = np.zeros(len(counts), dtype=np.int32)
-        if len(counts):
-            np.cumsum(padded[:-1], out=self.starts[1:])
-        capacity = max(int(padded.sum()), 4)
-        self.rows = aligned_empty((len(PACKET_ROWS), capacity), np.float32)
-        self.prim = aligned_empty((capacity,), np.int32)
-        self.u = aligned_empty((capacity,), np.float32)
-        self.v = aligned_empty((capacity,), np.float32)
-        self.index = aligned_empty((capacity,), np.int32)
+    def __init__(self, counts, _extra_rows=0):
+        self.counts = counts = np.ascontiguousarray(counts, dtype=np.int32)
+        self.starts = np.empty(len(counts), dtype=np.int32)
+        capacity = isa.module("_gather").layout(counts, self.starts)
+        # one block: the packet rows, then prim, u, v, index (and the caller's extra rows)
+        lane_bytes = capacity * 4
+        rows, prim, u, v, index, *extra = _carve(len(PACKET_ROWS) * lane_bytes,
+                                                 *[lane_bytes] * (4 + _extra_rows))
+        self.rows = rows.view(np.float32).reshape(len(PACKET_ROWS), capacity)
+        self.prim, self.index = prim.view(np.int32), index.view(np.int32)
+        self.u, self.v = u.view(np.float32), v.view(np.float32)
+        self._extra = [row.view(np.float32) for row in extra]
 
     def slice(self, first, last):
         """A view of sub-packets ``[first, last)`` sharing this batch's rows and hits
         (for splitting one traversal call over threads)."""
         view = object.__new__(Packets)
-        for name in ("rows", "prim", "u", "v", "index"):
+        for name in ("rows", "prim", "u", "v", "index", "_extra"):
             setattr(view, name, getattr(self, name))
         view.starts, view.counts = self.starts[first:last], self.counts[first:last]
         return view
@@ -320,8 +388,8 @@ def gather_checked(rays, order, offsets, packets, keep_tmax=False, check_order=T
     kernels = isa.module("_gather")
     if len(order) != len(rays) or not kernels.offsets_valid(offsets, len(rays), max_packet):
         return None, None, -1
-    batch = Packets(np.diff(offsets))
-    tmax = np.empty(batch.capacity, np.float32) if keep_tmax else None
+    batch = Packets(np.diff(offsets), _extra_rows=int(keep_tmax))
+    tmax = batch._extra[0] if keep_tmax else None
     order_ok, bad_ray = kernels.gather(rays.data, order, offsets, batch.starts, batch.rows,
                                        batch.prim, batch.u, batch.v, batch.index, packets,
                                        tmax, check_order)

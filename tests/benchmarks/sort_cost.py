@@ -10,8 +10,10 @@ For each scene (default: sibenik, sponza, forest) the first-bounce diffuse rays 
 bench --kernels`` measures) are, for every sorter (default: every installed one) and every
 traversal, sorted, gathered and traced, and each of the three is timed by the thread's CPU
 clock (``time.thread_time``: one thread, so other jobs on the machine count less than in wall
-time).  The configurations (sorter x traversal) run in interleaved rounds, in an order
-shuffled per round, after one untimed warm-up round (:func:`raysort.bench.rounds.run_rounds`).
+time).  The gather is the pipeline's gather stage (:func:`raysort.rays.gather_checked`, which
+checks the sorter's order against the large packets on the way, as a render does by default).
+The configurations (sorter x traversal) run in interleaved rounds, in an order shuffled per
+round, after one untimed warm-up round (:func:`raysort.bench.rounds.run_rounds`).
 Per configuration it prints the medians of sort, gather and trace [min-max], and the median of
 the per-round shares (sort + gather) / trace [min-max]: the budget of issue 13 is 10 %.  Every
 configuration's hits must equal the first one's (t bit for bit, prim), or the run fails.
@@ -30,7 +32,7 @@ import numpy as np
 from raysort import registry
 from raysort.bench.report import load_average, machine_info
 from raysort.bench.rounds import run_rounds, summary
-from raysort.rays import gather, scatter
+from raysort.rays import gather_checked, scatter
 from raysort.scene import load_scene
 from raysort.workloads import workload
 
@@ -55,7 +57,7 @@ class Config:
         t0 = time.thread_time()
         order, offsets = self.sorter.sort(w.rays, packets_in, bounds)
         t1 = time.thread_time()
-        packets = gather(w.rays, order, offsets)
+        packets = gather_checked(w.rays, order, offsets, w.packets)[0]
         t2 = time.thread_time()
         self.traversal.intersect(self.bvh, packets, any_hit=False)
         t3 = time.thread_time()

@@ -1,7 +1,8 @@
 /* raysort: the one SIMD header.
  *
- * With wide8.h (the 8-lane kernels built on it), the only file that includes
- * compiler intrinsics.  It provides
+ * With the wider vocabularies built on it (lanes.h: RS_SW lanes by ISA;
+ * wide8.h: 8 lanes), the only files that include compiler intrinsics.  It
+ * provides
  *   - a 4-lane float/mask vocabulary (rs_v4f, rs_v4m) with an SSE2 path and a
  *     portable scalar path, chosen at build time: setup.py defines
  *     RAYSORT_NO_SIMD for the "scalar" ISA build, and non-x86 machines get the
@@ -9,8 +10,8 @@
  *     path with VEX/EVEX encoding and may add wider code (RS_ISA_AVX2, ...);
  *   - the numeric kernels every traversal shares: slab tests of one ray or 4
  *     rays against a box, Moller-Trumbore tests of one ray or 4 rays against a
- *     triangle, the interval-arithmetic (frustum) box test, and the 4-ray
- *     gather used to build aligned sub-packets.
+ *     triangle, and the interval-arithmetic (frustum) box test (the gather
+ *     that builds aligned sub-packets is in gather.h).
  *
  * Exactness: the 1-ray and 4-ray kernels perform the same IEEE operations in
  * the same order (the build uses -ffp-contract=off, so nothing is fused), and
@@ -362,60 +363,6 @@ RS_INLINE int rs_tri4(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
         rs_store(r->v + i, rs_blend(ok, v, rs_load(r->v + i)));
     }
     return bits;
-}
-
-/* ------------------------------------------------------------------------ */
-/* Gather: 4 rays from a structure-of-arrays batch into an aligned packet    */
-/* ------------------------------------------------------------------------ */
-/* src[0..7] are the rows ox oy oz dx dy dz tmin tmax of the source batch;
- * idx[k] < 0 marks a padding lane.  Writes lanes [j, j+4) of the packet rows
- * dst[RS_PACKET_*] from the ray rows src[RS_RAY_*], with 4-wide stores (the
- * paper's temporary 4-ray packet), and resets prim/u/v.  A ray is stored
- * active only if its origin and direction are finite and 0 <= tmin < tmax;
- * otherwise (NaN rays, padding) it is stored inactive.  Subnormal direction
- * components are stored as zeros, so 1 / d is either finite or +-inf. */
-RS_INLINE int rs_gather4(float *const dst[RS_PACKET_ROWS], int32_t *prim, float *u, float *v,
-                         float *tmax, int j, const float *const src[RS_RAY_ROWS],
-                         const int32_t idx[4])
-{
-    /* Returns the lanes (bits) holding a ray that breaks the ray contract: active
-       (tmin < tmax) yet with tmin < 0 or a non-finite origin or direction.  Such a ray,
-       like every invalid one, is stored inactive.  tmax (unless NULL) gets a copy of
-       the row t as stored, for the check of the traversal's hits. */
-    float lane[RS_RAY_ROWS][4];
-    for (int k = 0; k < 4; ++k) {
-        int32_t s = idx[k];
-        for (int c = 0; c < RS_RAY_ROWS; ++c)
-            lane[c][k] = s >= 0 ? src[c][s] : 0.0f;
-    }
-    const rs_v4f zero = rs_set1(0.0f), inf = rs_set1(INFINITY);
-    int present = (idx[0] >= 0) | (idx[1] >= 0) << 1 | (idx[2] >= 0) << 2 | (idx[3] >= 0) << 3;
-    rs_v4f row[RS_RAY_ROWS];
-    for (int c = 0; c < RS_RAY_ROWS; ++c)
-        row[c] = rs_load(lane[c]);
-    rs_v4m good = rs_ge(row[RS_RAY_TMIN], zero);
-    for (int a = 0; a < 3; ++a) {   /* finite: |x| < inf, false for NaN */
-        rs_v4f o = row[RS_RAY_OX + a], d = row[RS_RAY_DX + a];
-        good = rs_and(good, rs_lt(rs_max(o, rs_sub(zero, o)), inf));
-        good = rs_and(good, rs_lt(rs_max(d, rs_sub(zero, d)), inf));
-    }
-    rs_v4m active = rs_lt(row[RS_RAY_TMIN], row[RS_RAY_TMAX]);
-    rs_v4m ok = rs_and(rs_mask_from_bits(present), rs_and(good, active));
-    for (int a = 0; a < 3; ++a) {
-        rs_v4f d = rs_blend(ok, rs_flush_subnormal(row[RS_RAY_DX + a]), zero);
-        rs_store(dst[RS_PACKET_OX + a] + j, rs_blend(ok, row[RS_RAY_OX + a], zero));
-        rs_store(dst[RS_PACKET_DX + a] + j, d);
-        rs_store(dst[RS_PACKET_IX + a] + j, rs_blend(ok, rs_div(rs_set1(1.0f), d), zero));
-    }
-    rs_store(dst[RS_PACKET_TMIN] + j, rs_blend(ok, row[RS_RAY_TMIN], inf));
-    rs_v4f t = rs_blend(ok, row[RS_RAY_TMAX], rs_set1(-INFINITY));
-    rs_store(dst[RS_PACKET_T] + j, t);
-    if (tmax)
-        rs_store(tmax + j, t);
-    rs_storei(prim + j, rs_set1i(-1));
-    rs_store(u + j, zero);
-    rs_store(v + j, zero);
-    return present & rs_movemask(active) & ~rs_movemask(good);
 }
 
 #endif
