@@ -217,8 +217,9 @@ def build_parser():
     r.add_argument("--depth", type=_non_negative, default=None,
                    help="bounces after the primary hit: sets the shader's max_depth (lambert's default: 2)")
     r.add_argument("--seed", type=_seed, default=0, help="random seed, 0..2**32-1 (0)")
-    r.add_argument("--sorter", default="nah", help="sorter name or name:key=value,... (nah)")
-    r.add_argument("--traversal", default="wide8", help="traversal name or spec (wide8)")
+    r.add_argument("--sorter", default="none", help="sorter name or name:key=value,... (none)")
+    r.add_argument("--traversal", default=None,
+                   help="traversal name or spec (stream with AVX2/AVX-512, else wide8)")
     r.add_argument("--generator", default="pinhole", help="generator name or spec (pinhole)")
     r.add_argument("--shader", default="lambert", help="shader name or spec (lambert)")
     r.add_argument("--shadow-rays", choices=("on", "off"), default=None,

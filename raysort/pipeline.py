@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from raysort import contract, registry
+from raysort import contract, isa, registry
 from raysort.bvh import BVH
 from raysort.errors import ConfigError
 from raysort.params import boolean, integer
@@ -41,7 +41,8 @@ from raysort.rays import MAX_RAYS, Hits, RayBatch, add_unoccluded, gather_checke
 from raysort.scene import Scene, load_scene
 from raysort.stats import Counters
 
-__all__ = ["Pipeline", "RenderResult", "RenderStats", "Traced", "STAGES", "morton_order"]
+__all__ = ["Pipeline", "RenderResult", "RenderStats", "Traced", "STAGES", "morton_order",
+           "default_traversal"]
 
 #: stage names used in timings, in pipeline order ("check": the contract checks)
 STAGES = ("generate", "sort", "check", "gather", "traverse", "scatter", "shade")
@@ -228,8 +229,11 @@ class Pipeline:
     scene : Scene, or a scene name / path (see :func:`raysort.scene.load_scene`)
     generator, sorter, traversal, shader : str or dict or plugin instance
         a plugin name (``"nah"``), a spec (``"none:packet_size=1024"``) or a
-        dict with a ``"type"`` key and parameters.  The defaults, ``nah`` and
-        ``wide8``, are the fastest exact combination measured (BENCHMARKS.md).
+        dict with a ``"type"`` key and parameters.  The defaults are the fastest
+        exact combination measured (BENCHMARKS.md §1, §7): sorter ``none`` and
+        traversal :func:`default_traversal` (``stream`` with AVX2 or AVX-512,
+        ``wide8`` otherwise); the paper's method is ``sorter="nah",
+        traversal="ranged"``.
     tile : int, default 32
         tile edge in pixels; one sample pass over a tile is a large packet.
     threads : int, default 1
@@ -246,7 +250,7 @@ class Pipeline:
         ``split_alpha`` for an SBVH), see :class:`BVH`.
     """
 
-    def __init__(self, scene=None, *, generator="pinhole", sorter="nah", traversal="wide8",
+    def __init__(self, scene=None, *, generator="pinhole", sorter="none", traversal=None,
                  shader="lambert", tile=32, threads=1, batch_rays=16384, check_plugins=True,
                  bvh=None):
         if not (scene is None or isinstance(scene, (Scene, str, os.PathLike))):
@@ -261,7 +265,8 @@ class Pipeline:
         self.scene = scene if isinstance(scene, Scene) else load_scene(scene)
         self.generator = registry.create("generators", generator)
         self.sorter = registry.create("sorters", sorter)
-        self.traversal = registry.create("traversals", traversal)
+        self.traversal = registry.create("traversals", default_traversal() if traversal is None
+                                         else traversal)
         self.shader = registry.create("shaders", shader)
         self.tile = integer("tile", tile, 1, 64)
         self.threads = integer("threads", threads, 1)
@@ -544,6 +549,13 @@ class Pipeline:
         clock = _Clock(stats.stage_seconds)
         add_unoccluded(radiance, shadow.slot, shadow.contribution, occluded)
         clock.lap("shade")
+
+
+def default_traversal():
+    """The fastest exact traversal measured for the active ISA: ``stream`` where a
+    stream test covers 8 or 16 rays (AVX2, AVX-512), ``wide8`` on SSE2 and the scalar
+    build, where ``stream`` is slower (BENCHMARKS.md §7).  Images do not depend on it."""
+    return "stream" if isa.active() in ("avx2", "avx512") else "wide8"
 
 
 def _both(first, second):
