@@ -137,7 +137,8 @@ cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept
     cdef int j, k
     cdef float inv[BLOCK]
     cdef float ell[BLOCK]
-    cdef float u, v, s, below, L, p, t, ex, r, lo, hi, scale
+    cdef float leave[BLOCK]
+    cdef float u, v, s, below, L, p, t, r, lo, hi, scale
     # everything the loops read in locals: a store to c could alias *a, which would
     # keep the compiler from vectorising
     cdef const float *dx = a.d[0] + b
@@ -145,6 +146,7 @@ cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept
     cdef const float *dz = a.d[2] + b
     cdef const float *o
     cdef const float *d
+    cdef const float *tmax
     cdef float *out
     for k in range(3):
         o, out, lo, scale = a.o[k] + b, c + k * BLOCK, a.lo[k], a.scale[k]
@@ -178,16 +180,20 @@ cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept
         for j in range(m):
             p = a.prev_t[b + j]
             ell[j] = pick((p > 0) & (p < INFINITY), p * a.prev_scale, ell[j])
+    # where the ray leaves the scene box (for an origin inside it), one axis per loop so
+    # that the divisions vectorise
     for j in range(m):
-        t = a.tmax[b + j]
+        leave[j] = INFINITY
+    for k in range(3):
+        o, d, lo, hi = a.o[k] + b, a.d[k] + b, a.lo[k], a.hi[k]
+        for j in range(m):
+            r = ONE / (d[j] * inv[j])
+            leave[j] = rs_minf(leave[j], rs_maxf((lo - o[j]) * r, (hi - o[j]) * r))
+    tmax = a.tmax + b
+    for j in range(m):
+        t = tmax[j]
         L = pick(t >= ell[j], ell[j], rs_maxf(t, 0))   # also when tmax is NaN or negative
-        # where the ray leaves the scene box (for an origin inside it), pulled in a little
-        ex = INFINITY
-        for k in range(3):
-            r = ONE / (a.d[k][b + j] * inv[j])
-            ex = rs_minf(ex, rs_maxf((a.lo[k] - a.o[k][b + j]) * r,
-                                     (a.hi[k] - a.o[k][b + j]) * r))
-        ell[j] = rs_minf(rs_maxf(ex * EXIT_SHRINK, 0), L)
+        ell[j] = rs_minf(rs_maxf(leave[j] * EXIT_SHRINK, 0), L)   # the exit pulled in a little
     for k in range(3):
         o, d, out, lo, scale = a.o[k] + b, a.d[k] + b, c + (3 + k) * BLOCK, a.lo[k], a.scale[k]
         for j in range(m):
