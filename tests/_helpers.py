@@ -71,3 +71,26 @@ def grid_tie_rays(rng, n):
     d = np.column_stack([rng.choice([-2, -1, -0.5, 0.5, 1, 2], size=(n, 2)), np.full(n, -4.0)])
     o = np.column_stack([target - d[:, :2] * 1.25, np.full(n, 5.0)])   # exact dyadic hits
     return batch(o, d)
+
+
+def trace_one_call(name, bvh, rays, any_hit=False, size=None):
+    """Trace ``rays`` in input order with traversal ``name`` in one call, in sub-packets
+    of ``size`` rays (one sub-packet if None); returns (hits or occluded flags, counters)."""
+    from raysort.rays import gather, scatter, scatter_occluded
+
+    n = len(rays)
+    offsets = np.array([0, n], np.int32) if size is None else \
+        np.append(np.arange(0, n, size), n).astype(np.int32)
+    packets = gather(rays, np.arange(n, dtype=np.int32), offsets)
+    counters = raysort.create("traversals", name).intersect(bvh, packets, any_hit=any_hit)
+    hits = scatter_occluded(packets, n) if any_hit else scatter(packets, n)
+    return hits, counters
+
+
+def triangle_soup(rng, m=600):
+    """Random triangles of mixed sizes, a fifth of them on one floor (boxes of zero
+    height)."""
+    centres = rng.random((m, 1, 3)) * 10
+    V = (centres + rng.normal(size=(m, 3, 3)) * rng.choice([0.05, 0.5, 2.0], (m, 1, 1)))
+    V[: m // 5, :, 1] = 3.0
+    return V.reshape(-1, 3).astype(np.float32), np.arange(3 * m, dtype=np.int32).reshape(m, 3)

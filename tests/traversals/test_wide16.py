@@ -13,30 +13,21 @@ import pytest
 
 import raysort
 from raysort.bvh import BVH
-from raysort.rays import gather, scatter, scatter_occluded
+from raysort.rays import gather
 from raysort.reference import brute_force
 
-from _helpers import assert_same_hits, grid_scene, grid_tie_rays, random_rays
+from _helpers import (assert_same_hits, grid_scene, grid_tie_rays, random_rays, trace_one_call,
+                      triangle_soup)
 
 F32 = np.float32
 
 
 def trace(bvh, rays, any_hit=False, size=None):
-    n = len(rays)
-    offsets = np.array([0, n], np.int32) if size is None else \
-        np.append(np.arange(0, n, size), n).astype(np.int32)
-    packets = gather(rays, np.arange(n, dtype=np.int32), offsets)
-    counters = raysort.create("traversals", "wide16").intersect(bvh, packets, any_hit=any_hit)
-    hits = scatter_occluded(packets, n) if any_hit else scatter(packets, n)
-    return hits, counters
+    return trace_one_call("wide16", bvh, rays, any_hit, size)
 
 
 def soup(rng, m=800):
-    """Random triangles of mixed sizes, a fifth of them on one floor (thin boxes)."""
-    centres = rng.random((m, 1, 3)) * 10
-    V = (centres + rng.normal(size=(m, 3, 3)) * rng.choice([0.05, 0.5, 2.0], (m, 1, 1)))
-    V[: m // 5, :, 1] = 3.0
-    return V.reshape(-1, 3).astype(F32), np.arange(3 * m, dtype=np.int32).reshape(m, 3)
+    return triangle_soup(rng, m)
 
 
 def slots(nodes, width):
