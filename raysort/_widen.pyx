@@ -24,6 +24,33 @@ cdef inline double slot_area(const float *lo, const float *hi, int k, int stride
     return dx * dy + dy * dz + dz * dx
 
 
+cdef struct Slots:
+    # the children of one 16-wide node being formed
+    int m
+    int32_t child[WIDTH16]
+    unsigned short count[WIDTH16]
+    float lo[3][WIDTH16]
+    float hi[3][WIDTH16]
+
+
+cdef inline void take(Slots *s, int to, const float *lo, const float *hi, int stride, int k,
+                      int32_t child, unsigned short count) noexcept nogil:
+    """Slot ``to`` gets box ``k`` (``lo[a * stride + k]``, ...) and its child and count."""
+    cdef int a
+    s.child[to], s.count[to] = child, count
+    for a in range(3):
+        s.lo[a][to], s.hi[a][to] = lo[a * stride + k], hi[a * stride + k]
+
+
+cdef inline void append_children(Slots *s, const rs_node8 *n) noexcept nogil:
+    """Append the used slots (child != 0) of an 8-wide node."""
+    cdef int k
+    for k in range(WIDTH8):
+        if n.child[k] != 0:
+            take(s, s.m, &n.lo[0][0], &n.hi[0][0], WIDTH8, k, n.child[k], n.count[k])
+            s.m += 1
+
+
 cdef int widen_nodes(const rs_node8 *nodes8, int n8, rs_node16 *out, int *depth) except -1 nogil:
     """Write the 16-wide tree (root first, children after parents) into ``out``, which
     needs room for ``n8`` nodes; returns the number of nodes written."""
@@ -31,11 +58,7 @@ cdef int widen_nodes(const rs_node8 *nodes8, int n8, rs_node16 *out, int *depth)
     cdef int *level
     cdef int sp, src, dst, m, k, j, a, best, kids, n_out = 1, ref
     cdef double area, best_area
-    cdef int32_t child[WIDTH16]
-    cdef unsigned short count[WIDTH16]
-    cdef float lo[3][WIDTH16]
-    cdef float hi[3][WIDTH16]
-    cdef const rs_node8 *n
+    cdef Slots slots
     cdef rs_node16 *o
     if work == NULL:
         with gil:
@@ -47,52 +70,41 @@ cdef int widen_nodes(const rs_node8 *nodes8, int n8, rs_node16 *out, int *depth)
         sp -= 1
         src = work[2 * sp]
         dst = work[2 * sp + 1]
-        m = 0                                   # the node8's used slots (child != 0)
-        n = &nodes8[src]
-        for k in range(WIDTH8):
-            if n.child[k] != 0:
-                child[m], count[m] = n.child[k], n.count[k]
-                for a in range(3):
-                    lo[a][m], hi[a][m] = n.lo[a][k], n.hi[a][k]
-                m += 1
+        slots.m = 0
+        append_children(&slots, &nodes8[src])
         while True:                             # open the largest inner slot that fits
             best, best_area = -1, -1.0
-            for k in range(m):
-                if child[k] > 0:
+            for k in range(slots.m):
+                if slots.child[k] > 0:
                     kids = 0
                     for j in range(WIDTH8):
-                        kids += nodes8[child[k]].child[j] != 0
-                    area = slot_area(&lo[0][0], &hi[0][0], k, WIDTH16)
-                    if m - 1 + kids <= WIDTH16 and area > best_area:
+                        kids += nodes8[slots.child[k]].child[j] != 0
+                    area = slot_area(&slots.lo[0][0], &slots.hi[0][0], k, WIDTH16)
+                    if slots.m - 1 + kids <= WIDTH16 and area > best_area:
                         best, best_area = k, area
             if best < 0:
                 break
-            n = &nodes8[child[best]]
-            m -= 1                              # the last slot moves into the opened one
-            child[best], count[best] = child[m], count[m]
-            for a in range(3):
-                lo[a][best], hi[a][best] = lo[a][m], hi[a][m]
-            for j in range(WIDTH8):
-                if n.child[j] != 0:
-                    child[m], count[m] = n.child[j], n.count[j]
-                    for a in range(3):
-                        lo[a][m], hi[a][m] = n.lo[a][j], n.hi[a][j]
-                    m += 1
+            ref = slots.child[best]
+            slots.m -= 1                        # the last slot moves into the opened one
+            take(&slots, best, &slots.lo[0][0], &slots.hi[0][0], WIDTH16, slots.m,
+                 slots.child[slots.m], slots.count[slots.m])
+            append_children(&slots, &nodes8[ref])
+        m = slots.m
         o = &out[dst]
         for k in range(WIDTH16):
             for a in range(3):
-                o.lo[a][k] = lo[a][k] if k < m else INFINITY
-                o.hi[a][k] = hi[a][k] if k < m else -INFINITY
-            o.count[k] = count[k] if k < m else 0
+                o.lo[a][k] = slots.lo[a][k] if k < m else INFINITY
+                o.hi[a][k] = slots.hi[a][k] if k < m else -INFINITY
+            o.count[k] = slots.count[k] if k < m else 0
             o.child[k] = 0
         for k in range(8):
             o.pad[k] = 0
         for k in range(m):
-            if child[k] < 0:
-                o.child[k] = child[k]
+            if slots.child[k] < 0:
+                o.child[k] = slots.child[k]
             else:
                 o.child[k] = n_out
-                work[2 * sp] = child[k]
+                work[2 * sp] = slots.child[k]
                 work[2 * sp + 1] = n_out
                 sp += 1
                 n_out += 1
