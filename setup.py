@@ -42,6 +42,7 @@ ISA_MODULES = [
     "traversals.wide8",
     "traversals.wide16",
     "traversals.stream",
+    "traversals.frustum",
 ]
 
 

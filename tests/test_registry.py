@@ -24,7 +24,8 @@ BUILTINS = {
     "generators": {"pinhole"},
     "sorters": {"none", "nah", "nah_numpy", "origin_direction", "two_point", "termination",
                 "garanzha"},
-    "traversals": {"single", "masked", "ranged", "partition", "wide", "wide8", "wide16", "stream"},
+    "traversals": {"single", "masked", "ranged", "partition", "wide", "wide8", "wide16", "stream",
+                   "frustum"},
     "shaders": {"lambert", "ao"},
 }
 

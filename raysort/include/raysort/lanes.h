@@ -37,7 +37,8 @@ RS_INLINE int rs_lowest(int bits)
 /* ------------------------------------------------------------------------ */
 /* RS_SW-lane vocabulary over rays gathered by id                           */
 /* ------------------------------------------------------------------------ */
-/* sw_gather loads one row of rs_rays for the RS_SW ids of a group; the other
+/* sw_gather loads one row of rs_rays for the RS_SW ids of a group, sw_loadu
+ * RS_SW consecutive lanes of a row (from a multiple of 4); the other
  * operations are those of simd.h's 4-lane vocabulary, with the same operand
  * semantics (min/max return the second operand when either is NaN; != is true
  * for NaN). */
@@ -48,6 +49,7 @@ typedef __mmask16 rs_swm;
 typedef __m512i rs_swi;
 RS_INLINE rs_swi sw_ids(const int32_t *p) { return _mm512_loadu_si512((const void *)p); }
 RS_INLINE rs_swf sw_gather(const float *base, rs_swi id) { return _mm512_i32gather_ps(id, base, 4); }
+RS_INLINE rs_swf sw_loadu(const float *p) { return _mm512_loadu_ps(p); }
 RS_INLINE rs_swi sw_gatheri(const int32_t *base, rs_swi id)
 { return _mm512_i32gather_epi32(id, base, 4); }
 RS_INLINE rs_swf sw_set1(float a) { return _mm512_set1_ps(a); }
@@ -88,6 +90,7 @@ typedef __m256 rs_swm;
 typedef __m256i rs_swi;
 RS_INLINE rs_swi sw_ids(const int32_t *p) { return _mm256_loadu_si256((const __m256i *)p); }
 RS_INLINE rs_swf sw_gather(const float *base, rs_swi id) { return _mm256_i32gather_ps(base, id, 4); }
+RS_INLINE rs_swf sw_loadu(const float *p) { return _mm256_loadu_ps(p); }
 RS_INLINE rs_swi sw_gatheri(const int32_t *base, rs_swi id)
 { return _mm256_i32gather_epi32((const int *)base, id, 4); }
 RS_INLINE rs_swf sw_set1(float a) { return _mm256_set1_ps(a); }
@@ -147,6 +150,7 @@ RS_INLINE void sw_storei(int32_t *p, rs_swi a) { memcpy(p, a.i, sizeof a.i); }
 #  if RS_SSE
 RS_INLINE rs_swf sw_gather(const float *base, rs_swi id)
 { return rs_set4(base[id.i[0]], base[id.i[1]], base[id.i[2]], base[id.i[3]]); }
+#    define sw_loadu rs_load     /* lanes [4k, 4k + 4) of a row: 16-byte aligned */
 #    define sw_set1 rs_set1
 #    define sw_add rs_add
 #    define sw_sub rs_sub
@@ -179,6 +183,7 @@ RS_INLINE rs_swi sw_blendi(rs_swm m, rs_swi a, rs_swi b)
 }
 #  else
 RS_INLINE rs_swf sw_gather(const float *base, rs_swi id) { return base[id.i[0]]; }
+RS_INLINE rs_swf sw_loadu(const float *p) { return *p; }
 RS_INLINE rs_swf sw_set1(float a) { return a; }
 RS_INLINE rs_swf sw_add(rs_swf a, rs_swf b) { return a + b; }
 RS_INLINE rs_swf sw_sub(rs_swf a, rs_swf b) { return a - b; }

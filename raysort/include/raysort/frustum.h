@@ -1,0 +1,252 @@
+/* raysort: the `frustum` traversal, coherent packets through the 8-wide tree.
+ *
+ * A chunk of up to RS_FRUSTUM_CHUNK consecutive rays of a sub-packet descends
+ * the 8-wide BVH (BVH.wide8) together.  At an inner node one interval-
+ * arithmetic test (the chunk's ranges of origins and reciprocal directions,
+ * Wald et al. 2007's frustum, as rs_ia_miss) checks all eight child boxes at
+ * once, and the children it keeps are visited nearest first by their lower
+ * bound of entry.  At a leaf the chunk's rays meet the leaf's box one SIMD
+ * group at a time (rs_box1's operations per lane), and each ray that enters it
+ * meets the leaf's triangle groups as in `wide8` (rs_tri8_hit).  A box waiting
+ * on the stack is dropped once every ray of the chunk has a hit closer than
+ * where the chunk can first enter it.  A chunk whose directions do not keep
+ * their sign on at least two axes (incoherent rays: the frustum would cull
+ * nothing) is traced one ray at a time, as `wide8` does.
+ *
+ * Exactness: the interval test only culls a box that no ray's own slab test
+ * would enter (rounding is monotone, so the bounds computed from the ranges'
+ * corners bound every ray's value; axes with a sign change, zero or infinite
+ * reciprocals do not cull), and a box is dropped from the stack only when its
+ * lower bound exceeds every ray's t * RS_BOX_SLACK.  Every ray that could hold
+ * a hit in a leaf is tested against all of its triangles with rs_tri8_hit,
+ * which keeps the lowest (t, id) whatever the order: brute force's hit, bit for
+ * bit, on every ISA.
+ */
+#ifndef RAYSORT_FRUSTUM_H
+#define RAYSORT_FRUSTUM_H
+
+#include <stdint.h>
+#include <string.h>
+#include "stream.h"     /* rs_stream_single8 (and wide8.h, lanes.h) */
+
+/* Rays traced together; a sub-packet is cut into chunks of this many lanes. */
+#define RS_FRUSTUM_CHUNK 64
+
+/* A box the chunk waits to visit: child `slot` of node8 `parent`. */
+typedef struct rs_frustum_entry {
+    int32_t ref;        /* >= 0: an inner node8; < 0: a leaf, first group -ref - 1 */
+    int32_t tris;       /* the leaf's triangle groups */
+    int32_t parent;     /* the node8 holding the box */
+    int32_t slot;       /* its child slot there */
+    float entry;        /* a lower bound of where any ray of the chunk enters it */
+} rs_frustum_entry;
+
+/* Bounds of a chunk's active rays. */
+typedef struct rs_frustum_bounds {
+    float omin[3], omax[3];     /* origins */
+    float rmin[3], rmax[3];     /* reciprocal directions */
+    int cull[3];                /* the axis culls: one sign, finite and non-zero */
+    float tmin;                 /* the smallest tmin */
+    float tmax;                 /* the largest t: no ray looks farther */
+} rs_frustum_bounds;
+
+/* Bounds of the active rays of lanes [s, e); returns how many are active. */
+RS_INLINE int rs_frustum_bounds_of(const rs_rays *r, int s, int e, rs_frustum_bounds *b)
+{
+    int n = 0;
+    for (int a = 0; a < 3; ++a) {
+        b->omin[a] = b->rmin[a] = INFINITY;
+        b->omax[a] = b->rmax[a] = -INFINITY;
+    }
+    b->tmin = INFINITY;
+    b->tmax = -INFINITY;
+    for (int i = s; i < e; ++i) {
+        if (!(r->tmin[i] < r->t[i]))
+            continue;
+        ++n;
+        for (int a = 0; a < 3; ++a) {
+            b->omin[a] = rs_minf(r->o[a][i], b->omin[a]);
+            b->omax[a] = rs_maxf(r->o[a][i], b->omax[a]);
+            b->rmin[a] = rs_minf(r->inv[a][i], b->rmin[a]);
+            b->rmax[a] = rs_maxf(r->inv[a][i], b->rmax[a]);
+        }
+        b->tmin = rs_minf(r->tmin[i], b->tmin);
+        b->tmax = rs_maxf(r->t[i], b->tmax);
+    }
+    for (int a = 0; a < 3; ++a)
+        b->cull[a] = (b->rmin[a] > 0.0f && b->rmax[a] < INFINITY)
+                     || (b->rmax[a] < 0.0f && b->rmin[a] > -INFINITY);
+    return n;
+}
+
+/* The largest t of lanes [s, e): the farthest any ray still looks. */
+RS_INLINE float rs_frustum_reach(const rs_rays *r, int s, int e)
+{
+    float t = -INFINITY;
+    for (int i = s; i < e; ++i)
+        t = rs_maxf(r->t[i], t);
+    return t;
+}
+
+/* The chunk against the eight child boxes of a node: returns the mask of the
+ * boxes some ray may enter and stores a lower bound of the entry into each. */
+RS_INLINE int rs_frustum_node8(const rs_frustum_bounds *b, const rs_node8 *n, float entry[8])
+{
+    rs_v8f tn = rs8_set1(b->tmin), tf = rs8_set1(b->tmax);
+    for (int a = 0; a < 3; ++a) {
+        if (!b->cull[a])
+            continue;
+        int neg = b->rmax[a] < 0.0f;
+        rs_v8f near_plane = rs8_load(neg ? n->hi[a] : n->lo[a]);
+        rs_v8f far_plane = rs8_load(neg ? n->lo[a] : n->hi[a]);
+        rs_v8f omin = rs8_set1(b->omin[a]), omax = rs8_set1(b->omax[a]);
+        rs_v8f r0 = rs8_set1(b->rmin[a]), r1 = rs8_set1(b->rmax[a]);
+        /* every ray's (plane - o) lies in [plane - omax, plane - omin] */
+        rs_v8f n0 = rs8_sub(near_plane, omax), n1 = rs8_sub(near_plane, omin);
+        rs_v8f f0 = rs8_sub(far_plane, omax), f1 = rs8_sub(far_plane, omin);
+        rs_v8f near_t = rs8_min(rs8_min(rs8_mul(n0, r0), rs8_mul(n0, r1)),
+                                rs8_min(rs8_mul(n1, r0), rs8_mul(n1, r1)));
+        rs_v8f far_t = rs8_max(rs8_max(rs8_mul(f0, r0), rs8_mul(f0, r1)),
+                               rs8_max(rs8_mul(f1, r0), rs8_mul(f1, r1)));
+        tn = rs8_max(near_t, tn);
+        tf = rs8_min(far_t, tf);
+    }
+    rs8_store(entry, tn);
+    return rs8_movemask(rs8_le(tn, rs8_mul(tf, rs8_set1(RS_BOX_SLACK))));
+}
+
+/* Lanes [i, i + RS_SW) against one box: rs_box1's operations per lane. */
+RS_INLINE int rs_frustum_box_lanes(const rs_rays *r, int i, const float lo[3], const float hi[3])
+{
+    rs_swf tn = sw_loadu(r->tmin + i), tf = sw_loadu(r->t + i);
+    for (int a = 0; a < 3; ++a) {
+        rs_swf inv = sw_loadu(r->inv[a] + i), o = sw_loadu(r->o[a] + i);
+        rs_swm neg = sw_sign(inv);
+        rs_swf l = sw_set1(lo[a]), h = sw_set1(hi[a]);
+        tn = sw_max(sw_mul(sw_sub(sw_blend(neg, h, l), o), inv), tn);
+        tf = sw_min(sw_mul(sw_sub(sw_blend(neg, l, h), o), inv), tf);
+    }
+    return sw_bits(sw_le(tn, sw_mul(tf, sw_set1(RS_BOX_SLACK))));
+}
+
+/* The rays of lanes [s, e) (e - s <= RS_FRUSTUM_CHUNK) that enter child `slot`
+ * of node n, as a bit mask over lane - s.  Lanes up to e rounded up to a
+ * multiple of 4 are read (rows hold whole 4-lane groups); later ones never. */
+RS_INLINE uint64_t rs_frustum_leaf_rays(const rs_rays *r, int s, int e, const rs_node8 *n,
+                                        int slot, rs_counters *c)
+{
+    float lo[3], hi[3];
+    uint64_t hit = 0;
+    int e4 = (e + 3) & ~3, i = s;
+    for (int a = 0; a < 3; ++a) {
+        lo[a] = n->lo[a][slot];
+        hi[a] = n->hi[a][slot];
+    }
+    for (; i + RS_SW <= e4; i += RS_SW) {
+        c->box4 += 1;
+        hit |= (uint64_t)(uint32_t)rs_frustum_box_lanes(r, i, lo, hi) << (i - s);
+    }
+    if (i < e4) {                       /* whole 4-lane groups past the last RS_SW one */
+        rs_node box;
+        memset(&box, 0, sizeof box);
+        memcpy(box.lo, lo, sizeof lo);
+        memcpy(box.hi, hi, sizeof hi);
+        for (; i < e4; i += 4) {
+            c->box4 += 1;
+            hit |= (uint64_t)(uint32_t)rs_box4(r, i, &box) << (i - s);
+        }
+    }
+    return e - s < 64 ? hit & ((UINT64_C(1) << (e - s)) - 1) : hit;
+}
+
+/* Index of the lowest set bit of a non-zero 64-bit mask. */
+RS_INLINE int rs_lowest64(uint64_t bits)
+{
+    uint32_t low = (uint32_t)bits;
+    return low ? rs_lowest((int)low) : 32 + rs_lowest((int)(uint32_t)(bits >> 32));
+}
+
+/* Insert `e` into hit[0, m), sorted nearest first. */
+RS_INLINE void rs_frustum_insert(rs_frustum_entry *hit, int m, rs_frustum_entry e)
+{
+    int j = m;
+    while (j > 0 && hit[j - 1].entry > e.entry) {
+        hit[j] = hit[j - 1];
+        --j;
+    }
+    hit[j] = e;
+}
+
+/* One chunk, lanes [s, e), through the tree.  `stack` holds 7 entries per
+ * level of the tree plus 8; `single` is rs_stream_single8's stack. */
+RS_INLINE void rs_frustum_chunk(const rs_node8 *nodes, const rs_tri8 *groups, rs_rays *r, int s,
+                                int e, int any_hit, rs_frustum_entry *stack,
+                                rs_stream_entry *single, rs_counters *c)
+{
+    rs_frustum_bounds b;
+    if (!rs_frustum_bounds_of(r, s, e, &b))
+        return;
+    if (b.cull[0] + b.cull[1] + b.cull[2] < 2) {        /* incoherent: one ray at a time */
+        for (int i = s; i < e; ++i)
+            if (r->tmin[i] < r->t[i])
+                rs_stream_single8(nodes, groups, r, i, 0, 0, any_hit, single, c);
+        return;
+    }
+    rs_frustum_entry hit[8];
+    float entry[8];
+    int sp = 0;
+    stack[sp].ref = 0;
+    stack[sp].tris = 0;
+    stack[sp].parent = -1;
+    stack[sp].slot = 0;
+    stack[sp].entry = -INFINITY;
+    ++sp;
+    while (sp > 0) {
+        rs_frustum_entry top = stack[--sp];
+        if (top.entry > b.tmax * RS_BOX_SLACK)  /* every ray has a closer hit */
+            continue;
+        if (top.ref >= 0) {
+            const rs_node8 *n = &nodes[top.ref];
+            c->ia += 1;
+            int mask = rs_frustum_node8(&b, n, entry), m = 0;
+            for (; mask; mask &= mask - 1, ++m) {
+                int k = rs_lowest(mask);
+                rs_frustum_entry child = {n->child[k], n->count[k], top.ref, k, entry[k]};
+                rs_frustum_insert(hit, m, child);
+            }
+            for (int k = m - 1; k >= 0; --k) {  /* the nearest is popped first */
+                stack[sp++] = hit[k];
+                rs_prefetch(hit[k].ref >= 0 ? (const void *)&nodes[hit[k].ref]
+                            : (const void *)&groups[-hit[k].ref - 1]);
+            }
+            continue;
+        }
+        uint64_t rays = rs_frustum_leaf_rays(r, s, e, &nodes[top.parent], top.slot, c);
+        if (!rays)
+            continue;
+        const rs_tri8 *g = &groups[-top.ref - 1];
+        for (; rays; rays &= rays - 1) {
+            int i = s + rs_lowest64(rays);
+            rs_ray8 ray;
+            rs_ray8_load(r, i, &ray);
+            for (int k = 0; k < top.tris && r->tmin[i] < r->t[i]; ++k) {
+                c->tri4 += 1;                   /* (an any-hit query stops at its hit) */
+                rs_tri8_hit(r, i, &ray, &g[k], any_hit);
+            }
+        }
+        b.tmax = rs_frustum_reach(r, s, e);
+    }
+}
+
+/* Lanes [start, start + count) in chunks of RS_FRUSTUM_CHUNK. */
+static void rs_frustum_trace8(const rs_node8 *nodes, const rs_tri8 *groups, rs_rays *r,
+                              int start, int count, int any_hit, rs_frustum_entry *stack,
+                              rs_stream_entry *single, rs_counters *c)
+{
+    for (int s = start; s < start + count; s += RS_FRUSTUM_CHUNK) {
+        int e = s + RS_FRUSTUM_CHUNK < start + count ? s + RS_FRUSTUM_CHUNK : start + count;
+        rs_frustum_chunk(nodes, groups, r, s, e, any_hit, stack, single, c);
+    }
+}
+
+#endif

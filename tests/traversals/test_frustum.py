@@ -1,0 +1,134 @@
+"""The ``frustum`` traversal: coherent chunks of rays through the 8-wide BVH.
+
+Hits are compared with brute force (``raysort.reference``) on every ISA this CPU
+runs, for the rays the frustum path is for (camera rays from one point, parallel
+rays, rays with a zero direction component, rays from spread origins), with ties,
+zero-area triangles, inactive lanes and short sub-packets; incoherent chunks must
+take the single-ray path, whose hits and counters are ``wide8``'s.  (The
+conformance suite holds ``frustum`` to the full contract on the active ISA.)
+"""
+import numpy as np
+import pytest
+
+import raysort
+from raysort.bvh import BVH
+from raysort.reference import brute_force
+
+from _helpers import (assert_same_hits, batch, grid_scene, grid_tie_rays, random_rays,
+                      trace_one_call, triangle_soup)
+
+F32 = np.float32
+
+
+def trace(bvh, rays, any_hit=False, size=None, name="frustum"):
+    return trace_one_call(name, bvh, rays, any_hit, size)
+
+
+def camera(eye, target, n, fov=0.6, tile=8):
+    """``n`` x ``n`` pinhole rays from ``eye`` toward ``target``, in tile x tile blocks
+    (as the ``none`` sorter's packets of camera rays)."""
+    eye, target = np.asarray(eye, float), np.asarray(target, float)
+    w = target - eye
+    w /= np.linalg.norm(w)
+    u = np.cross(w, [0.0, 1.0, 0.0] if abs(w[1]) < 0.9 else [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(u, w)
+    s = (np.arange(n) + 0.5) / n * 2 - 1
+    by, bx = np.divmod(np.arange(n * n) // (tile * tile), n // tile)
+    iy, ix = np.divmod(np.arange(n * n) % (tile * tile), tile)
+    x, y = s[bx * tile + ix], s[by * tile + iy]
+    d = w + fov * (x[:, None] * u + y[:, None] * v)
+    return batch(np.tile(eye, (n * n, 1)), d / np.linalg.norm(d, axis=1, keepdims=True))
+
+
+@pytest.fixture(scope="module")
+def soup_bvh():
+    V, F = triangle_soup(np.random.default_rng(7), 800)
+    return V, F, BVH(V, F)
+
+
+@pytest.mark.parametrize("eye", [(-4.0, 5.0, -6.0), (14.0, 3.0, 15.0), (5.0, 20.0, 5.5)])
+def test_camera_rays_match_brute_force_on_every_isa(each_isa, soup_bvh, eye):
+    V, F, bvh = soup_bvh
+    rays = camera(eye, (5.0, 3.0, 5.0), 32)
+    ref = brute_force(V, F, rays)
+    assert 0.2 < (ref.prim >= 0).mean() < 0.98
+    for size in (None, 64, 36, 5):
+        hits, counters = trace(bvh, rays, size=size)
+        assert_same_hits(hits, ref, f"{each_isa}, sub-packets of {size}")
+        assert counters.ia > 0                  # the chunks took the frustum path
+    occluded, _ = trace(bvh, rays, any_hit=True, size=64)
+    assert np.array_equal(occluded, ref.prim >= 0)
+
+
+def test_parallel_and_axis_aligned_rays_on_every_isa(each_isa, soup_bvh, rng):
+    """One direction for every ray (the reciprocal ranges are points), from spread
+    origins, some with a zero direction component (that axis cannot cull)."""
+    V, F, bvh = soup_bvh
+    for d in ([0.3, -1.0, 0.2], [0.0, -1.0, 0.4], [0.0, -1.0, -0.0], [-1.0, 0.0, 0.0]):
+        o = rng.random((640, 3)) * [10, 0, 10] + [0, 12, 0]
+        if d[0] == -1.0:
+            o = rng.random((640, 3)) * [0, 10, 10] + [14, 0, 0]
+        rays = batch(o, np.tile(np.asarray(d) / np.linalg.norm(d), (640, 1)))
+        ref = brute_force(V, F, rays)
+        assert (ref.prim >= 0).any()
+        hits, counters = trace(bvh, rays, size=64)
+        assert_same_hits(hits, ref, f"{each_isa}, direction {d}")
+        assert (counters.ia > 0) == (np.count_nonzero(d) >= 2)
+
+
+def test_ties_and_zero_area_triangles_on_every_isa(each_isa, rng):
+    V, F = grid_scene(rng, zero_area=20)
+    rays = grid_tie_rays(rng, 3000)
+    octant = (rays.directions[0] > 0) * 2 + (rays.directions[1] > 0)
+    rays = rays.take(np.argsort(octant, kind="stable"))     # coherent chunks
+    ref = brute_force(V, F, rays)
+    assert (ref.prim >= 0).all()
+    for max_leaf in (1, 8):
+        bvh = BVH(V, F, max_leaf=max_leaf)
+        hits, counters = trace(bvh, rays, size=64)
+        assert_same_hits(hits, ref, f"{each_isa} ties, max_leaf {max_leaf}")
+        assert counters.ia > 0
+
+
+def test_extents_and_inactive_lanes(soup_bvh):
+    """tmin > 0, finite tmax, and rays that are empty (tmax <= tmin) between them."""
+    V, F, bvh = soup_bvh
+    rays = camera((-4.0, 5.0, -6.0), (5.0, 3.0, 5.0), 16)
+    n = len(rays)
+    rays.tmin[:] = np.where(np.arange(n) % 3 == 0, 2.0, 0.0)
+    rays.tmax[:] = np.where(np.arange(n) % 5 == 0, 9.0, np.inf)
+    rays.tmax[np.arange(n) % 7 == 0] = 1.0
+    rays.tmin[np.arange(n) % 7 == 0] = 1.0
+    ref = brute_force(V, F, rays)
+    for size in (64, 20):
+        hits, _ = trace(bvh, rays, size=size)
+        assert_same_hits(hits, ref, f"sub-packets of {size}")
+
+
+def test_incoherent_chunks_trace_one_ray_at_a_time_as_wide8(soup_bvh, rng):
+    V, F, bvh = soup_bvh
+    rays = random_rays(rng, 2000, bvh.bounds)
+    ref = brute_force(V, F, rays)
+    hits, counters = trace(bvh, rays, size=64)
+    assert_same_hits(hits, ref, "random rays")
+    _, wide8 = trace(bvh, rays, size=64, name="wide8")
+    assert counters.ia == 0
+    assert (counters.box4, counters.tri4) == (wide8.box4, wide8.tri4)
+
+
+def test_camera_chunks_test_fewer_boxes_than_wide8(soup_bvh):
+    """Sharing the walk: fewer box tests per ray than one ray at a time (counters,
+    not time)."""
+    V, F, bvh = soup_bvh
+    rays = camera((-4.0, 5.0, -6.0), (5.0, 3.0, 5.0), 64)
+    _, frustum = trace(bvh, rays, size=64)
+    _, wide8 = trace(bvh, rays, size=64, name="wide8")
+    assert frustum.ia + frustum.box4 < wide8.box4 / 2
+
+
+def test_renders_the_image_of_wide8():
+    scene = raysort.load_scene("cornell")
+    images = [raysort.Pipeline(scene, traversal=t).render(48, 48, spp=2, seed=3).image
+              for t in ("frustum", "wide8")]
+    assert np.array_equal(images[0], images[1])
