@@ -21,10 +21,11 @@ sorter helps through the order (neighbouring rays share nodes and leaves,
 so streams stay large deeper in the tree).
 """
 from libc.stdint cimport int32_t, int64_t, uint8_t
+from libc.stdlib cimport malloc, free
 from raysort._types cimport rs_node4, rs_node8, rs_tri, rs_tri8, rs_rays, rs_counters, rays_view
 
 from raysort import isa
-from raysort.sdk import ConfigError, Counters, PluginContractError, Traversal, integer
+from raysort.sdk import ConfigError, Counters, PluginContractError, Traversal, boolean, integer
 
 
 cdef extern from "raysort/stream.h" nogil:
@@ -42,6 +43,19 @@ cdef extern from "raysort/stream.h" nogil:
     void rs_stream_trace8(const rs_node8 *nodes, const rs_tri8 *groups, rs_rays *r, int n,
                           int any_hit, int order, int min_stream, rs_stream_scratch *w,
                           rs_counters *c)
+
+
+cdef extern from "raysort/frustum.h" nogil:
+    enum: RS_FRUSTUM_CHUNK
+    ctypedef struct rs_frustum_entry:
+        pass
+    ctypedef struct rs_frustum_bounds:
+        pass
+    int rs_frustum_bounds_of(const rs_rays *r, int s, int e, rs_frustum_bounds *b)
+    int rs_frustum_coherent(const rs_frustum_bounds *b)
+    void rs_frustum_walk(const rs_node8 *nodes, const rs_tri8 *groups, rs_rays *r, int s, int e,
+                         int any_hit, rs_frustum_bounds *b, rs_frustum_entry *stack,
+                         rs_counters *c)
 
 
 cdef void trace_stream(int width, const void *tree, const void *leaves, rs_rays *r, int n,
@@ -69,11 +83,16 @@ def lanes():
     return RS_SW
 
 
-def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream, int width):
-    """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa)."""
+def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream, int width,
+          bint frustum=False):
+    """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa);
+    with ``frustum`` (8-wide tree only) coherent chunks of a sub-packet take the
+    ``frustum`` traversal's walk and only the others join the streams."""
     cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
     cdef int capacity = packets.capacity, n_packets = starts.shape[0]
-    cdef int k, i, m, size, ok, levels
+    cdef int k, i, m, size, ok, levels, s, e
+    cdef rs_frustum_bounds bounds
+    cdef rs_frustum_entry *chunk_stack = NULL
     cdef long long active = 0
     for k in range(n_packets):
         if starts[k] < 0 or counts[k] < 0 or <long long> starts[k] + counts[k] > capacity:
@@ -104,20 +123,36 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
     if active == 0:
         return Counters()
     size = <int> min(stream_size, active)
+    frustum = frustum and width == 8
     if not rs_stream_alloc(&w, size, width, depth):
         raise MemoryError()
     try:
+        if frustum:     # 7 waiting boxes per level, as rs_stream_slots
+            chunk_stack = <rs_frustum_entry *> malloc((7 * depth + 8) * sizeof(rs_frustum_entry))
+            if chunk_stack == NULL:
+                raise MemoryError()
         with nogil:
             m = 0
             for k in range(n_packets):
-                for i in range(starts[k], starts[k] + counts[k]):
-                    if rays.tmin[i] < rays.t[i]:
-                        w.ids[m] = i
-                        m += 1
-                        if m == size:
-                            trace_stream(width, tree, leaves, &rays, m, any_hit, order,
-                                         min_stream, &w, &c)
-                            m = 0
+                s = starts[k]
+                while s < starts[k] + counts[k]:
+                    e = min(s + RS_FRUSTUM_CHUNK, starts[k] + counts[k])
+                    if frustum and starts[k] % 4 == 0 \
+                            and rs_frustum_bounds_of(&rays, s, e, &bounds) \
+                            and rs_frustum_coherent(&bounds):
+                        rs_frustum_walk(<const rs_node8 *> tree, <const rs_tri8 *> leaves,
+                                        &rays, s, e, any_hit, &bounds, chunk_stack, &c)
+                        s = e
+                        continue
+                    for i in range(s, e):
+                        if rays.tmin[i] < rays.t[i]:
+                            w.ids[m] = i
+                            m += 1
+                            if m == size:
+                                trace_stream(width, tree, leaves, &rays, m, any_hit, order,
+                                             min_stream, &w, &c)
+                                m = 0
+                    s = e
             if m:
                 trace_stream(width, tree, leaves, &rays, m, any_hit, order, min_stream, &w, &c)
         levels = w.depth + 1
@@ -126,7 +161,8 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
         level_rays = tuple([w.level_rays[k] for k in range(levels)])
     finally:
         rs_stream_free(&w)
-    return Counters(rays=active, box1=c.box1, box4=c.box4, tri1=c.tri1, tri4=c.tri4,
+        free(chunk_stack)
+    return Counters(rays=active, ia=c.ia, box1=c.box1, box4=c.box4, tri1=c.tri1, tri4=c.tri4,
                     stream_tasks=c.stream_tasks, stream_rays=c.stream_rays,
                     stream_level_rays=level_rays)
 
@@ -151,6 +187,8 @@ class StreamTraversal(Traversal):
     ``stream_tasks`` / ``stream_rays`` give the mean stream size;
     ``stream_level_rays[d]`` counts the rays of the streams popped at depth
     ``d`` of the tree (0: the root; a leaf is one level below its node).
+    With ``frustum``, coherent chunks count as in ``frustum`` (N_IA per node,
+    SIMD N_B per group of rays at a leaf's box, SIMD N_T per ray and group).
 
     ===========  ======  ==========  ========================================
     parameter    type    default     meaning
@@ -169,12 +207,17 @@ class StreamTraversal(Traversal):
                                      4-wide one (``BVH.wide``), slower with
                                      every SIMD ISA on every scene measured
                                      (BENCHMARKS.md §7)
+    frustum      bool    True        coherent chunks of 64 rays of a
+                                     sub-packet (camera rays, shadow rays
+                                     to one light) take the ``frustum``
+                                     traversal's walk, only the others
+                                     form streams (8-wide tree only)
     ===========  ======  ==========  ========================================
     """
 
     trusted = True
 
-    def __init__(self, *, stream_size=16384, order="votes", min_stream=8, tree=8):
+    def __init__(self, *, stream_size=16384, order="votes", min_stream=8, tree=8, frustum=True):
         self.stream_size = integer("stream_size", stream_size, 1, MAX_STREAM)
         if order not in ORDERS:
             raise ConfigError(f"order must be one of {', '.join(ORDERS)}; got {order!r}")
@@ -183,8 +226,10 @@ class StreamTraversal(Traversal):
         self.tree = integer("tree", tree, min(TREES), max(TREES))
         if self.tree not in TREES:
             raise ConfigError(f"tree must be 4 or 8; got {tree!r}")
+        self.frustum = boolean("frustum", frustum)
 
     def intersect(self, bvh, packets, any_hit=False):
         return isa.module("traversals.stream").trace(bvh, packets, any_hit, self.stream_size,
                                                      ORDERS[self.order], self.min_stream,
-                                                     self.tree)
+                                                     self.tree, self.frustum)
+

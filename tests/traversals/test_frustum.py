@@ -26,7 +26,8 @@ def trace(bvh, rays, any_hit=False, size=None, name="frustum"):
 
 def camera(eye, target, n, fov=0.6, tile=8):
     """``n`` x ``n`` pinhole rays from ``eye`` toward ``target``, in tile x tile blocks
-    (as the ``none`` sorter's packets of camera rays)."""
+    (as the ``none`` sorter's packets of camera rays); ``fov`` is the half-width of
+    the image plane at distance 1."""
     eye, target = np.asarray(eye, float), np.asarray(target, float)
     w = target - eye
     w /= np.linalg.norm(w)
@@ -50,9 +51,9 @@ def soup_bvh():
 @pytest.mark.parametrize("eye", [(-4.0, 5.0, -6.0), (14.0, 3.0, 15.0), (5.0, 20.0, 5.5)])
 def test_camera_rays_match_brute_force_on_every_isa(each_isa, soup_bvh, eye):
     V, F, bvh = soup_bvh
-    rays = camera(eye, (5.0, 3.0, 5.0), 32)
+    rays = camera(eye, (5.0, 3.0, 5.0), 64)
     ref = brute_force(V, F, rays)
-    assert 0.2 < (ref.prim >= 0).mean() < 0.98
+    assert 0.2 < (ref.prim >= 0).mean() < 1.0
     for size in (None, 64, 36, 5):
         hits, counters = trace(bvh, rays, size=size)
         assert_same_hits(hits, ref, f"{each_isa}, sub-packets of {size}")
@@ -80,8 +81,7 @@ def test_parallel_and_axis_aligned_rays_on_every_isa(each_isa, soup_bvh, rng):
 def test_ties_and_zero_area_triangles_on_every_isa(each_isa, rng):
     V, F = grid_scene(rng, zero_area=20)
     rays = grid_tie_rays(rng, 3000)
-    octant = (rays.directions[0] > 0) * 2 + (rays.directions[1] > 0)
-    rays = rays.take(np.argsort(octant, kind="stable"))     # coherent chunks
+    rays = rays.take(np.lexsort(rays.directions[:2]))       # coherent chunks: one direction
     ref = brute_force(V, F, rays)
     assert (ref.prim >= 0).all()
     for max_leaf in (1, 8):
@@ -94,7 +94,7 @@ def test_ties_and_zero_area_triangles_on_every_isa(each_isa, rng):
 def test_extents_and_inactive_lanes(soup_bvh):
     """tmin > 0, finite tmax, and rays that are empty (tmax <= tmin) between them."""
     V, F, bvh = soup_bvh
-    rays = camera((-4.0, 5.0, -6.0), (5.0, 3.0, 5.0), 16)
+    rays = camera((-4.0, 5.0, -6.0), (5.0, 3.0, 5.0), 32, fov=0.3)
     n = len(rays)
     rays.tmin[:] = np.where(np.arange(n) % 3 == 0, 2.0, 0.0)
     rays.tmax[:] = np.where(np.arange(n) % 5 == 0, 9.0, np.inf)
@@ -102,8 +102,9 @@ def test_extents_and_inactive_lanes(soup_bvh):
     rays.tmin[np.arange(n) % 7 == 0] = 1.0
     ref = brute_force(V, F, rays)
     for size in (64, 20):
-        hits, _ = trace(bvh, rays, size=size)
+        hits, counters = trace(bvh, rays, size=size)
         assert_same_hits(hits, ref, f"sub-packets of {size}")
+        assert counters.ia > 0
 
 
 def test_incoherent_chunks_trace_one_ray_at_a_time_as_wide8(soup_bvh, rng):

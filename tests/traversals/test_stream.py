@@ -15,6 +15,7 @@ from raysort.bvh import BVH
 from raysort.rays import PacketRow, RayBatch, gather, scatter, scatter_occluded
 from raysort.reference import brute_force
 from raysort.stats import Counters
+from raysort.workloads import camera_rays
 
 from _helpers import assert_same_hits, random_rays
 
@@ -133,6 +134,23 @@ def test_sibenik_diffuse(each_isa, workloads, sibenik):
                    dict(tree=4, min_stream=0, order="direction", stream_size=500)):
         hits, _ = trace(sibenik.bvh(), rays, order, offsets, **params)
         assert_same_hits(hits, ref, f"{each_isa} sibenik {params}")
+
+
+@pytest.mark.parametrize("frustum", [True, False])
+def test_coherent_chunks_take_the_frustum_walk(each_isa, sibenik, frustum):
+    """Camera rays in the ``none`` sorter's 8x8 packets: with ``frustum`` (the default)
+    their chunks take the ``frustum`` traversal's walk (N_IA counted) instead of
+    forming streams; the hits are brute force's either way."""
+    rays = camera_rays(sibenik, 64, 64)[0].rays
+    ref = brute_force(sibenik.vertices, sibenik.faces, rays)
+    order, offsets = raysort.create("sorters", "none").sort(
+        rays, np.array([0, len(rays)], np.int32), sibenik.bvh().bounds)
+    hits, c = trace(sibenik.bvh(), rays, order, offsets, frustum=frustum)
+    assert_same_hits(hits, ref, f"{each_isa} sibenik camera, frustum={frustum}")
+    if frustum:
+        assert c.ia > 0 and c.stream_rays < len(rays) // 2
+    else:
+        assert c.ia == 0 and c.stream_rays >= len(rays)
 
 
 def test_lanes_follow_the_isa(each_isa):
@@ -276,6 +294,8 @@ def test_parameters_are_checked():
     for tree in (2, 16, "8", True):
         with pytest.raises(raysort.ConfigError, match="tree"):
             raysort.create("traversals", {"type": "stream", "tree": tree})
+    with pytest.raises(raysort.ConfigError, match="frustum"):
+        raysort.create("traversals", {"type": "stream", "frustum": "yes please"})
 
 
 def test_pipeline_image_equals_wide(sibenik):
