@@ -73,6 +73,21 @@ def grid_tie_rays(rng, n):
     return batch(o, d)
 
 
+def tie_case(rng, coherent=False):
+    """:func:`grid_scene` with 20 zero-area triangles, 3000 :func:`grid_tie_rays` (in
+    chunks of one direction with ``coherent``) and brute force's hits, every ray a hit:
+    (V, F, rays, hits)."""
+    from raysort.reference import brute_force
+
+    V, F = grid_scene(rng, zero_area=20)
+    rays = grid_tie_rays(rng, 3000)
+    if coherent:
+        rays = rays.take(np.lexsort(rays.directions[:2]))
+    ref = brute_force(V, F, rays)
+    assert (ref.prim >= 0).all()
+    return V, F, rays, ref
+
+
 def trace_one_call(name, bvh, rays, any_hit=False, size=None):
     """Trace ``rays`` in input order with traversal ``name`` in one call, in sub-packets
     of ``size`` rays (one sub-packet if None); returns (hits or occluded flags, counters)."""

@@ -14,7 +14,7 @@ import raysort
 from raysort.bvh import BVH
 from raysort.reference import brute_force
 
-from _helpers import (assert_same_hits, batch, grid_scene, grid_tie_rays, random_rays,
+from _helpers import (assert_same_hits, batch, random_rays, tie_case,
                       trace_one_call, triangle_soup)
 
 F32 = np.float32
@@ -79,11 +79,7 @@ def test_parallel_and_axis_aligned_rays_on_every_isa(each_isa, soup_bvh, rng):
 
 
 def test_ties_and_zero_area_triangles_on_every_isa(each_isa, rng):
-    V, F = grid_scene(rng, zero_area=20)
-    rays = grid_tie_rays(rng, 3000)
-    rays = rays.take(np.lexsort(rays.directions[:2]))       # coherent chunks: one direction
-    ref = brute_force(V, F, rays)
-    assert (ref.prim >= 0).all()
+    V, F, rays, ref = tie_case(rng, coherent=True)
     for max_leaf in (1, 8):
         bvh = BVH(V, F, max_leaf=max_leaf)
         hits, counters = trace(bvh, rays, size=64)

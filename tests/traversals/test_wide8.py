@@ -16,7 +16,7 @@ from raysort import procedural
 from raysort.bvh import BVH
 from raysort.reference import brute_force
 
-from _helpers import (assert_same_hits, batch, grid_scene, grid_tie_rays, random_rays,
+from _helpers import (assert_same_hits, batch, random_rays, tie_case,
                       trace_one_call, triangle_soup)
 
 F32 = np.float32
@@ -48,10 +48,7 @@ def test_random_rays_match_brute_force_on_every_isa(each_isa, rng, max_leaf, gro
 
 
 def test_ties_and_zero_area_triangles_on_every_isa(each_isa, rng):
-    V, F = grid_scene(rng, zero_area=20)
-    rays = grid_tie_rays(rng, 3000)
-    ref = brute_force(V, F, rays)
-    assert (ref.prim >= 0).all()
+    V, F, rays, ref = tie_case(rng)
     for max_leaf in (1, 8):
         bvh = BVH(V, F, max_leaf=max_leaf)
         for group_cost, merged in ((1.0, 16), (0.1, 64)):
