@@ -150,12 +150,12 @@ RS_INLINE void rs_stream_filter(const rs_rays *r, int width, const float *lo, co
         rs_swf o[3], inv[3];
         rs_swm neg[3];
         for (int a = 0; a < 3; ++a) {
-            o[a] = sw_gather(r->o[a], id);
-            inv[a] = sw_gather(r->inv[a], id);
+            o[a] = sw_gather_loads(r->o[a], id);
+            inv[a] = sw_gather_loads(r->inv[a], id);
             neg[a] = sw_sign(inv[a]);
             down[a] += rs_popcount(sw_bits(neg[a]) & valid);
         }
-        rs_swf tmin = sw_gather(r->tmin, id), t = sw_gather(r->t, id), best = inf;
+        rs_swf tmin = sw_gather_loads(r->tmin, id), t = sw_gather_loads(r->t, id), best = inf;
         rs_swi nearest = sw_set1i(-1);      /* per lane: j of the nearest live child hit */
         for (int j = 0; j < m; ++j) {
             int k = live[j];
@@ -227,11 +227,11 @@ RS_INLINE void rs_stream_lanes_load(const rs_rays *r, const int32_t *ids, int g,
     int valid;
     s->id = rs_stream_group(ids, g, n, &valid);
     for (int a = 0; a < 3; ++a) {
-        s->o[a] = sw_gather(r->o[a], s->id);
-        s->d[a] = sw_gather(r->d[a], s->id);
+        s->o[a] = sw_gather_loads(r->o[a], s->id);
+        s->d[a] = sw_gather_loads(r->d[a], s->id);
     }
-    s->tmin = sw_gather(r->tmin, s->id);
-    s->best = sw_gather(r->t, s->id);
+    s->tmin = sw_gather_loads(r->tmin, s->id);
+    s->best = sw_gather_loads(r->t, s->id);
     s->prim = sw_gatheri(r->prim, s->id);
     s->u = s->v = sw_set1(0.0f);
     s->valid = sw_from_bits(valid);
