@@ -322,13 +322,17 @@ cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcep
     cdef float c[KEY_COORDS * BLOCK]
     cdef int32_t q[KEY_COORDS * BLOCK]
     cdef uint64_t *kb
+    cdef int32_t index[KEY_COORDS * BLOCK]
     cdef const int32_t *q0
-    cdef const int32_t *q1
-    cdef const int32_t *q2
     cdef const int32_t *r0
-    cdef const int32_t *r1
-    cdef const int32_t *r2
-    cdef int s0, s1, s2, t0, t1, t2, w0, w1, w2
+    cdef int32_t *out
+    cdef const uint64_t *p0
+    cdef const uint64_t *p1
+    cdef const uint64_t *p2
+    cdef int s0, t0, w0
+    cdef const float *dx
+    cdef const float *dy
+    cdef const float *dz
     # the table's rows (see key_table): coordinate k's low byte, then its high byte
     cdef const uint64_t *low[KEY_COORDS]
     cdef const uint64_t *high[KEY_COORDS]
@@ -343,24 +347,24 @@ cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcep
             quantise(&c[k * BLOCK], &q[k * BLOCK], m)
         # the key is the OR of one table entry per byte of each quantised coordinate
         kb = keys + (b - start)
-        if not a.low_bytes and a.n_lookups == 3:     # the default keys: one loop, no stores
-            q0, q1, q2 = &q[a.first[0] * BLOCK], &q[a.first[1] * BLOCK], &q[a.first[2] * BLOCK]
-            r0, r1, r2 = &q[a.second[0] * BLOCK], &q[a.second[1] * BLOCK], &q[a.second[2] * BLOCK]
-            s0, s1, s2 = a.shift_first[0], a.shift_first[1], a.shift_first[2]
-            t0, t1, t2 = a.shift_second[0], a.shift_second[1], a.shift_second[2]
-            w0, w1, w2 = a.width_second[0], a.width_second[1], a.width_second[2]
-            for j in range(m):
-                kb[j] = (a.pairs[0][(q0[j] >> s0) << w0 | r0[j] >> t0]
-                         | a.pairs[1][(q1[j] >> s1) << w1 | r1[j] >> t1]
-                         | a.pairs[2][(q2[j] >> s2) << w2 | r2[j] >> t2])
-        elif not a.low_bytes:
-            for j in range(m):
-                kb[j] = 0
+        if not a.low_bytes:
+            # each lookup's index (a loop the compiler vectorises), then the lookups
             for k in range(a.n_lookups):
-                q0, r0 = &q[a.first[k] * BLOCK], &q[a.second[k] * BLOCK]
+                q0, r0, out = &q[a.first[k] * BLOCK], &q[a.second[k] * BLOCK], &index[k * BLOCK]
                 s0, t0, w0 = a.shift_first[k], a.shift_second[k], a.width_second[k]
                 for j in range(m):
-                    kb[j] |= a.pairs[k][(q0[j] >> s0) << w0 | r0[j] >> t0]
+                    out[j] = (q0[j] >> s0) << w0 | r0[j] >> t0
+            if a.n_lookups == 3:    # the default keys: one loop, no stores
+                p0, p1, p2 = a.pairs[0], a.pairs[1], a.pairs[2]
+                for j in range(m):
+                    kb[j] = p0[index[j]] | p1[index[BLOCK + j]] | p2[index[2 * BLOCK + j]]
+            else:
+                for j in range(m):
+                    kb[j] = 0
+                for k in range(a.n_lookups):
+                    p0, out = a.pairs[k], &index[k * BLOCK]
+                    for j in range(m):
+                        kb[j] |= p0[out[j]]
         else:                   # a long key: both bytes of every coordinate
             for j in range(m):
                 kb[j] = 0
@@ -368,10 +372,10 @@ cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcep
                 for j in range(m):
                     kb[j] |= low[k][q[k * BLOCK + j] & 255] | high[k][q[k * BLOCK + j] >> 8]
         if a.octant:            # the direction's octant first (bit k: d[k] < 0)
+            dx, dy, dz = a.d[0] + b, a.d[1] + b, a.d[2] + b
             for j in range(m):
-                kb[j] = (kb[j] >> 3 | <uint64_t> (a.d[0][b + j] < 0) << 63
-                         | <uint64_t> (a.d[1][b + j] < 0) << 62
-                         | <uint64_t> (a.d[2][b + j] < 0) << 61)
+                kb[j] = (kb[j] >> 3 | <uint64_t> (dx[j] < 0) << 63
+                         | <uint64_t> (dy[j] < 0) << 62 | <uint64_t> (dz[j] < 0) << 61)
         b += m
 
 
