@@ -17,15 +17,20 @@ vectorises:
    split (Morton interleave, a block of one coordinate's bits first, a plain
    concatenation as in a hash) is just a table, built by :func:`key_table`.
 
+A key that reads only the high byte of each coordinate (every default key) is
+looked up two coordinates at a time (:func:`plan_lookups`): three loads per ray.
+
 Keys are left aligned in a uint64: the sort looks at the top ``8 * digits``
 bits.  Within every large packet, ``(key, ray)`` pairs are sorted by a stable
-LSD radix sort on bytes (a pass whose byte is the same for every key is
-skipped; the ray's index rides in the key's low bits, which the sort does not
-look at, whenever they have room for it), optionally after Garanzha and Loop's
-compression: runs of equal keys
-in input order become one chunk, only chunks are sorted, and the runs are
-copied back in chunk order (the result is the same order; the work is on
-fewer items when the input has long runs).  The sorted run is then cut into
+LSD radix sort on the bits from the highest to the lowest one that differ
+between the packet's keys, in digits of 8 to :data:`MAX_DIGIT_BITS` bits
+(:func:`digit_plan`; a pass whose digit is the same for every key is skipped;
+the ray's index rides in the key's low bits, below the sorted ones, whenever
+they have room for it), optionally after Garanzha and Loop's compression: runs
+of equal keys in input order become one chunk, only chunks are sorted, and the
+runs are copied back in chunk order (the result is the same order; the work is
+on fewer items when the input has long runs, so it is skipped for a packet
+with more than half as many runs as rays).  The sorted run is then cut into
 sub-packets of at most ``packet_size`` rays, and also wherever the top
 ``split_bits`` bits of the key change.
 
@@ -203,6 +208,7 @@ cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept
     cdef const float *o
     cdef const float *d
     cdef const float *tmax
+    cdef const float *prev
     cdef float *out
     for k in range(3):
         o, out, lo, scale = a.o[k] + b, c + k * BLOCK, a.lo[k], a.scale[k]
@@ -230,12 +236,14 @@ cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept
                 out[j] = HALF * (d[j] * inv[j]) + HALF
         return
     # END_POINT: o + L d/|d|, L the estimated length clamped to tmax and the box exit
+    L, scale = a.length, a.prev_scale
     for j in range(m):
-        ell[j] = a.length
+        ell[j] = L
     if a.prev_t != NULL:
+        prev = a.prev_t + b
         for j in range(m):
-            p = a.prev_t[b + j]
-            ell[j] = pick((p > 0) & (p < INFINITY), p * a.prev_scale, ell[j])
+            p = prev[j]
+            ell[j] = pick((p > 0) & (p < INFINITY), p * scale, L)
     # where the ray leaves the scene box (for an origin inside it), one axis per loop so
     # that the divisions vectorise
     for j in range(m):
@@ -275,7 +283,8 @@ cdef void plan_lookups(KeyInputs *a, int n_coords) noexcept nogil:
     and one on its top ``v`` bits, ``u + v <= 8``, share a table of ``2^(u + v)``
     entries (each the OR of their two rows' entries).  The default keys need three
     lookups per ray instead of five or six; the keys are the same."""
-    cdef int k, j, l, best, ia, ib, u[KEY_COORDS]
+    cdef int k, j, l, best, ia, ib
+    cdef int u[KEY_COORDS]
     cdef bint done[KEY_COORDS]
     cdef const uint64_t *row_a
     cdef const uint64_t *row_b
@@ -355,14 +364,17 @@ cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcep
                 for j in range(m):
                     out[j] = (q0[j] >> s0) << w0 | r0[j] >> t0
             if a.n_lookups == 3:    # the default keys: one loop, no stores
-                p0, p1, p2 = a.pairs[0], a.pairs[1], a.pairs[2]
+                p0 = a.pairs[0]
+                p1 = a.pairs[1]
+                p2 = a.pairs[2]
                 for j in range(m):
                     kb[j] = p0[index[j]] | p1[index[BLOCK + j]] | p2[index[2 * BLOCK + j]]
             else:
                 for j in range(m):
                     kb[j] = 0
                 for k in range(a.n_lookups):
-                    p0, out = a.pairs[k], &index[k * BLOCK]
+                    p0 = a.pairs[k]
+                    out = &index[k * BLOCK]
                     for j in range(m):
                         kb[j] |= p0[out[j]]
         else:                   # a long key: both bytes of every coordinate
@@ -595,6 +607,8 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     cdef uint64_t mask, low, key, prev = 0, all_and, all_or, dmask
     cdef uint64_t *sk
     cdef int32_t *si
+    cdef int32_t *h1
+    cdef int32_t *h2
     # a chunk is every ray, or (compress) every run of equal keys in input order
     cdef int n = end - start, bits = 8 * digits
     # the chunk's index goes into the key's low bits, which the sort does not look at,
@@ -619,19 +633,22 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
                &passes)
     buckets = 1 << width
     dmask = <uint64_t> buckets - 1
-    memset(count, 0, passes * buckets * sizeof(int32_t))
+    # up to three digits are counted in one loop without tests (the histograms of
+    # digits beyond passes are counted too, and not used)
+    memset(count, 0, max(passes, 3) * buckets * sizeof(int32_t))
+    shift1 = min(low_bit + width, 63)       # (a shift by 64 would be undefined)
+    shift2 = min(low_bit + 2 * width, 63)
+    h1, h2 = count + buckets, count + 2 * buckets
     # chunks and the radix sort's histograms, in one pass (keys may be ckey itself:
     # chunk nc <= ray i is written after ray i is read)
     if simple:                      # the common case, in one tight loop
         if passes <= 3:
-            shift1 = min(low_bit + width, 63)       # (a shift by 64 would be undefined)
-            shift2 = min(low_bit + 2 * width, 63)
             for i in range(n):
                 key = keys[i]
                 ckey[i] = (key & mask) | <uint64_t> i
                 count[(key >> low_bit) & dmask] += 1
-                count[buckets + ((key >> shift1) & dmask)] += passes > 1
-                count[2 * buckets + ((key >> shift2) & dmask)] += passes > 2
+                h1[(key >> shift1) & dmask] += 1
+                h2[(key >> shift2) & dmask] += 1
         else:
             for i in range(n):
                 key = keys[i]
@@ -652,13 +669,11 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
                 nc += 1
             prev = key
         cstart[nc] = end
-        shift1 = min(low_bit + width, 63)
-        shift2 = min(low_bit + 2 * width, 63)
         for i in range(nc):
             key = ckey[i]
             count[(key >> low_bit) & dmask] += 1
-            count[buckets + ((key >> shift1) & dmask)] += passes > 1
-            count[2 * buckets + ((key >> shift2) & dmask)] += passes > 2
+            h1[(key >> shift1) & dmask] += 1
+            h2[(key >> shift2) & dmask] += 1
             for j in range(3, passes):
                 count[j * buckets + ((key >> (low_bit + j * width)) & dmask)] += 1
     flip = radix_sort(ckey, items, ckey_tmp, citem_tmp, nc, low_bit, width, passes, count)
