@@ -91,6 +91,7 @@ cdef extern from *:
     #include "raysort/simd.h"
     /* c ? a : b, as a select the compiler vectorises (a Cython conditional is a branch) */
     static inline float rs_keysort_pick(int c, float a, float b) { return c ? a : b; }
+    static inline int rs_keysort_pick_int(int c, int a, int b) { return c ? a : b; }
     /* out[j] = 1 / sqrt(x[j]), four at a time where SSE is there: a loop of sqrtf calls
      * does not vectorise (errno), and SQRTPS rounds exactly as sqrtf does */
     static inline void rs_keysort_inv_sqrt(const float *x, float *out, int m)
@@ -156,6 +157,7 @@ cdef extern from *:
     }
     """
     float pick "rs_keysort_pick"(bint c, float a, float b) noexcept nogil
+    int pick_int "rs_keysort_pick_int"(bint c, int a, int b) noexcept nogil
     void inv_sqrt "rs_keysort_inv_sqrt"(const float *x, float *out, int m) noexcept nogil
     void quantise "rs_keysort_quantise"(const float *c, int32_t *q, int m) noexcept nogil
     int clz64 "rs_keysort_clz64"(uint64_t x) noexcept nogil
@@ -609,6 +611,7 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     cdef int32_t *si
     cdef int32_t *h1
     cdef int32_t *h2
+    cdef bint cut
     # a chunk is every ray, or (compress) every run of equal keys in input order
     cdef int n = end - start, bits = 8 * digits
     # the chunk's index goes into the key's low bits, which the sort does not look at,
@@ -679,10 +682,7 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     flip = radix_sort(ckey, items, ckey_tmp, citem_tmp, nc, low_bit, width, passes, count)
     sk = ckey_tmp if flip else ckey
     si = citem_tmp if flip else citem
-    if simple:
-        for j in range(nc):
-            order[start + j] = start + <int> (sk[j] & low)
-    elif compress:
+    if compress:
         # decompress: each chunk's rays, in input order, at the chunk's sorted place
         pos = start
         for j in range(nc):
@@ -692,19 +692,25 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
                 skey[pos - start] = sk[j]
                 pos += 1
         sk = skey
-    else:
+    elif not simple:
         for j in range(nc):
             order[start + j] = start + si[j]
-    # sub-packets: at most packet_size rays, and a new one where the key's top bits change
+    # sub-packets: at most packet_size rays, and a new one where the key's top bits
+    # change; without branches (where the key changes is not predictable), the order of
+    # a packed sort read on the way
     mask = 0 if split_bits == 0 else ~(<uint64_t> 0) << (64 - split_bits)
-    c = 0
-    last = start
-    for pos in range(start, end):
-        if (pos == start or pos - last == packet_size
-                or (sk[pos - start] ^ sk[pos - start - 1]) & mask):
-            offsets[c] = pos
-            c += 1
-            last = pos
+    offsets[0] = start
+    c = 1
+    last = 0                        # (relative to start, like i)
+    if simple:
+        order[start] = start + <int> (sk[0] & low)
+    for i in range(1, n):
+        if simple:
+            order[start + i] = start + <int> (sk[i] & low)
+        cut = (i - last == packet_size) | (((sk[i] ^ sk[i - 1]) & mask) != 0)
+        offsets[c] = start + i          # kept only where cut (c moves on)
+        c += cut
+        last = pick_int(cut, i, last)
     return c
 
 
