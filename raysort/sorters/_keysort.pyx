@@ -92,8 +92,8 @@ cdef extern from *:
     /* c ? a : b, as a select the compiler vectorises (a Cython conditional is a branch) */
     static inline float rs_keysort_pick(int c, float a, float b) { return c ? a : b; }
     static inline int rs_keysort_pick_int(int c, int a, int b) { return c ? a : b; }
-    /* out[j] = 1 / sqrt(x[j]), four at a time where SSE is there: a loop of sqrtf calls
-     * does not vectorise (errno), and SQRTPS rounds exactly as sqrtf does */
+    /* out[j] = 1 / sqrt(x[j]), eight at a time with AVX2, four with SSE: a loop of sqrtf
+     * calls does not vectorise (errno), and SQRTPS rounds exactly as sqrtf does */
     static inline void rs_keysort_inv_sqrt(const float *x, float *out, int m)
     {
         int j = 0;
@@ -111,8 +111,9 @@ cdef extern from *:
     }
     /* q[j] = (int)(min(max(c[j], 0), 1) * 65535): a coordinate clamped to [0, 1] (NaN
      * -> 0) and quantised to 16 bits (COORD_BITS: 65535 = 2^16 - 1).  MAXPS/MINPS return the second operand on NaN,
-     * as rs_maxf/rs_minf do, so every ISA gives the same q; written with intrinsics
-     * because the compiler leaves the branchy scalar form unvectorised. */
+     * as rs_maxf/rs_minf do, so every ISA gives the same q (eight at a time with AVX2,
+     * four with SSE); written with intrinsics because the compiler leaves the branchy
+     * scalar form unvectorised. */
     static inline void rs_keysort_quantise(const float *c, int32_t *q, int m)
     {
         int j = 0;
