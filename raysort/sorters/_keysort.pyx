@@ -17,15 +17,20 @@ vectorises:
    split (Morton interleave, a block of one coordinate's bits first, a plain
    concatenation as in a hash) is just a table, built by :func:`key_table`.
 
+A key that reads only the high byte of each coordinate (every default key) is
+looked up two coordinates at a time (:func:`plan_lookups`): three loads per ray.
+
 Keys are left aligned in a uint64: the sort looks at the top ``8 * digits``
 bits.  Within every large packet, ``(key, ray)`` pairs are sorted by a stable
-LSD radix sort on bytes (a pass whose byte is the same for every key is
-skipped; the ray's index rides in the key's low bits, which the sort does not
-look at, whenever they have room for it), optionally after Garanzha and Loop's
-compression: runs of equal keys
-in input order become one chunk, only chunks are sorted, and the runs are
-copied back in chunk order (the result is the same order; the work is on
-fewer items when the input has long runs).  The sorted run is then cut into
+LSD radix sort on the bits from the highest to the lowest one that differ
+between the packet's keys, in digits of 8 to :data:`MAX_DIGIT_BITS` bits
+(:func:`digit_plan`; a pass whose digit is the same for every key is skipped;
+the ray's index rides in the key's low bits, below the sorted ones, whenever
+they have room for it), optionally after Garanzha and Loop's compression: runs
+of equal keys in input order become one chunk, only chunks are sorted, and the
+runs are copied back in chunk order (the result is the same order; the work is
+on fewer items when the input has long runs, so it is skipped for a packet
+with more than half as many runs as rays).  The sorted run is then cut into
 sub-packets of at most ``packet_size`` rays, and also wherever the top
 ``split_bits`` bits of the key change.
 
@@ -38,16 +43,19 @@ from libc.stdint cimport int32_t, int64_t, uint32_t, uint64_t
 from libc.string cimport memset
 from raysort._types cimport rs_maxf, rs_minf
 
+import math
+
 import numpy as np
 
 from raysort import isa
 from raysort.sdk import MAX_PACKET, ConfigError, Sorter, boolean, check_packets, integer
 
-#: bits each coordinate is quantised to (a key table has two byte-tables per coordinate)
-COORD_BITS = 16
 cdef enum:
     KEY_COORDS = 6          # most coordinates a key draws from
+    COORD_BITS_C = 16       # bits each coordinate is quantised to
     TABLE_ROW = 256         # entries of a key table row: one per value of a coordinate byte
+#: bits each coordinate is quantised to (a key table has two byte-tables per coordinate)
+COORD_BITS = COORD_BITS_C
 #: most coordinates a key draws from
 MAX_COORDS = KEY_COORDS
 
@@ -66,7 +74,14 @@ cdef float EXIT_SHRINK = 1.0 - 1.0e-3
 cdef float ONE = 1.0        # float constants: a bare 0.5 or 1.0 would make the C double
 cdef float HALF = 0.5
 cdef enum:
+    MIN_DIGIT = 8           # a radix digit's width: at least a byte,
+    MAX_DIGIT = 11          # at most 2048 buckets (wider ones cost more than a pass)
+    COUNT_SIZE = 8 << MAX_DIGIT         # histogram ints: 64 bits take at most 8 digits
+cdef enum:
     BLOCK = 256             # rays whose coordinates are computed together, loop by loop
+#: widest and narrowest radix digit (bits)
+MAX_DIGIT_BITS = MAX_DIGIT
+MIN_DIGIT_BITS = MIN_DIGIT
 #: bits of the octant prefix (the signs of dx, dy, dz)
 OCTANT_BITS = 3
 
@@ -76,11 +91,17 @@ cdef extern from *:
     #include "raysort/simd.h"
     /* c ? a : b, as a select the compiler vectorises (a Cython conditional is a branch) */
     static inline float rs_keysort_pick(int c, float a, float b) { return c ? a : b; }
-    /* out[j] = 1 / sqrt(x[j]), four at a time where SSE is there: a loop of sqrtf calls
-     * does not vectorise (errno), and SQRTPS rounds exactly as sqrtf does */
+    static inline int rs_keysort_pick_int(int c, int a, int b) { return c ? a : b; }
+    /* out[j] = 1 / sqrt(x[j]), eight at a time with AVX2, four with SSE: a loop of sqrtf
+     * calls does not vectorise (errno), and SQRTPS rounds exactly as sqrtf does */
     static inline void rs_keysort_inv_sqrt(const float *x, float *out, int m)
     {
         int j = 0;
+    #if RS_ISA_AVX2
+        for (; j + 8 <= m; j += 8)
+            _mm256_storeu_ps(out + j, _mm256_div_ps(_mm256_set1_ps(1.0f),
+                                                    _mm256_sqrt_ps(_mm256_loadu_ps(x + j))));
+    #endif
     #if RS_SSE
         for (; j + 4 <= m; j += 4)
             _mm_storeu_ps(out + j, _mm_div_ps(_mm_set1_ps(1.0f), _mm_sqrt_ps(_mm_loadu_ps(x + j))));
@@ -90,11 +111,20 @@ cdef extern from *:
     }
     /* q[j] = (int)(min(max(c[j], 0), 1) * 65535): a coordinate clamped to [0, 1] (NaN
      * -> 0) and quantised to 16 bits (COORD_BITS: 65535 = 2^16 - 1).  MAXPS/MINPS return the second operand on NaN,
-     * as rs_maxf/rs_minf do, so every ISA gives the same q; written with intrinsics
-     * because the compiler leaves the branchy scalar form unvectorised. */
+     * as rs_maxf/rs_minf do, so every ISA gives the same q (eight at a time with AVX2,
+     * four with SSE); written with intrinsics because the compiler leaves the branchy
+     * scalar form unvectorised. */
     static inline void rs_keysort_quantise(const float *c, int32_t *q, int m)
     {
         int j = 0;
+    #if RS_ISA_AVX2
+        const __m256 zero8 = _mm256_setzero_ps(), one8 = _mm256_set1_ps(1.0f),
+                     qmax8 = _mm256_set1_ps(65535.0f);
+        for (; j + 8 <= m; j += 8) {
+            __m256 x = _mm256_min_ps(_mm256_max_ps(_mm256_loadu_ps(c + j), zero8), one8);
+            _mm256_storeu_si256((__m256i *)(q + j), _mm256_cvttps_epi32(_mm256_mul_ps(x, qmax8)));
+        }
+    #endif
     #if RS_SSE
         const __m128 zero = _mm_setzero_ps(), one = _mm_set1_ps(1.0f), qmax = _mm_set1_ps(65535.0f);
         for (; j + 4 <= m; j += 4) {
@@ -105,10 +135,34 @@ cdef extern from *:
         for (; j < m; ++j)
             q[j] = (int32_t)(rs_minf(rs_maxf(c[j], 0.0f), 1.0f) * 65535.0f);
     }
+    /* the highest and lowest set bit of a nonzero x */
+    static inline int rs_keysort_clz64(uint64_t x)
+    {
+    #if defined(__GNUC__) || defined(__clang__)
+        return __builtin_clzll(x);
+    #else
+        int n = 0;
+        while (!(x >> 63)) { x <<= 1; ++n; }
+        return n;
+    #endif
+    }
+    static inline int rs_keysort_ctz64(uint64_t x)
+    {
+    #if defined(__GNUC__) || defined(__clang__)
+        return __builtin_ctzll(x);
+    #else
+        int n = 0;
+        while (!(x & 1)) { x >>= 1; ++n; }
+        return n;
+    #endif
+    }
     """
     float pick "rs_keysort_pick"(bint c, float a, float b) noexcept nogil
+    int pick_int "rs_keysort_pick_int"(bint c, int a, int b) noexcept nogil
     void inv_sqrt "rs_keysort_inv_sqrt"(const float *x, float *out, int m) noexcept nogil
     void quantise "rs_keysort_quantise"(const float *c, int32_t *q, int m) noexcept nogil
+    int clz64 "rs_keysort_clz64"(uint64_t x) noexcept nogil
+    int ctz64 "rs_keysort_ctz64"(uint64_t x) noexcept nogil
 
 
 cdef struct KeyInputs:
@@ -126,6 +180,16 @@ cdef struct KeyInputs:
     const uint64_t *table       # (MAX_COORDS, 2, 256) from key_table
     bint low_bytes              # the table uses the low byte of some coordinate
     bint octant
+    # when it does not: the key is the OR of n_lookups entries of pair tables, entry
+    # l indexed by the top used bits of coordinates first[l] and second[l] (see
+    # plan_lookups)
+    int n_lookups
+    int first[KEY_COORDS]
+    int second[KEY_COORDS]
+    int shift_first[KEY_COORDS]
+    int shift_second[KEY_COORDS]
+    int width_second[KEY_COORDS]
+    uint64_t pairs[KEY_COORDS][TABLE_ROW]
 
 
 cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept nogil:
@@ -147,6 +211,7 @@ cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept
     cdef const float *o
     cdef const float *d
     cdef const float *tmax
+    cdef const float *prev
     cdef float *out
     for k in range(3):
         o, out, lo, scale = a.o[k] + b, c + k * BLOCK, a.lo[k], a.scale[k]
@@ -174,12 +239,14 @@ cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept
                 out[j] = HALF * (d[j] * inv[j]) + HALF
         return
     # END_POINT: o + L d/|d|, L the estimated length clamped to tmax and the box exit
+    L, scale = a.length, a.prev_scale
     for j in range(m):
-        ell[j] = a.length
+        ell[j] = L
     if a.prev_t != NULL:
+        prev = a.prev_t + b
         for j in range(m):
-            p = a.prev_t[b + j]
-            ell[j] = pick((p > 0) & (p < INFINITY), p * a.prev_scale, ell[j])
+            p = prev[j]
+            ell[j] = pick((p > 0) & (p < INFINITY), p * scale, L)
     # where the ray leaves the scene box (for an origin inside it), one axis per loop so
     # that the divisions vectorise
     for j in range(m):
@@ -200,12 +267,84 @@ cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept
             out[j] = (o[j] + ell[j] * (d[j] * inv[j]) - lo) * scale
 
 
+cdef int used_bits(const uint64_t *row) noexcept nogil:
+    """How many top bits of a coordinate's high byte a table row depends on."""
+    cdef int u, x
+    cdef bint same
+    for u in range(9):
+        same = True
+        for x in range(TABLE_ROW):
+            same &= row[x] == row[x & (0xFF00 >> u) & 0xFF]
+        if same:
+            return u
+    return 8
+
+
+cdef void plan_lookups(KeyInputs *a, int n_coords) noexcept nogil:
+    """Pair the coordinates of a short key (the table reads only their high bytes) so
+    that one lookup serves two: a coordinate whose row depends on its top ``u`` bits
+    and one on its top ``v`` bits, ``u + v <= 8``, share a table of ``2^(u + v)``
+    entries (each the OR of their two rows' entries).  The default keys need three
+    lookups per ray instead of five or six; the keys are the same."""
+    cdef int k, j, l, best, ia, ib
+    cdef int u[KEY_COORDS]
+    cdef bint done[KEY_COORDS]
+    cdef const uint64_t *row_a
+    cdef const uint64_t *row_b
+    for k in range(KEY_COORDS):
+        row_a = a.table + (2 * k + 1) * TABLE_ROW
+        u[k] = used_bits(row_a)
+        # a coordinate the key does not draw from (or one the mode does not compute)
+        done[k] = k >= n_coords or (u[k] == 0 and row_a[0] == 0)
+    a.n_lookups = 0
+    while True:
+        # the widest coordinate left, with the widest partner that fits beside it
+        k = -1
+        for j in range(KEY_COORDS):
+            if not done[j] and (k < 0 or u[j] > u[k]):
+                k = j
+        if k < 0:
+            return
+        done[k] = True
+        best = -1
+        for j in range(KEY_COORDS):
+            if not done[j] and u[k] + u[j] <= 8 and (best < 0 or u[j] > u[best]):
+                best = j
+        l = a.n_lookups
+        a.n_lookups += 1
+        a.first[l], a.shift_first[l] = k, COORD_BITS_C - u[k]
+        row_a = a.table + (2 * k + 1) * TABLE_ROW
+        if best < 0:            # alone: the second index is q >> 16 = 0
+            a.second[l], a.shift_second[l], a.width_second[l] = k, COORD_BITS_C, 0
+            for ia in range(1 << u[k]):
+                a.pairs[l][ia] = row_a[(ia << (8 - u[k])) & 0xFF]
+            continue
+        done[best] = True
+        a.second[l], a.shift_second[l], a.width_second[l] = best, COORD_BITS_C - u[best], u[best]
+        row_b = a.table + (2 * best + 1) * TABLE_ROW
+        for ia in range(1 << u[k]):
+            for ib in range(1 << u[best]):
+                a.pairs[l][ia << u[best] | ib] = (row_a[(ia << (8 - u[k])) & 0xFF]
+                                                   | row_b[(ib << (8 - u[best])) & 0xFF])
+
+
 cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcept nogil:
     """The keys of rays [start, start + n) into keys[0, n), BLOCK rays at a time."""
     cdef int b, j, k, m, n_coords = 5 if a.mode == DIR_OCTAHEDRAL else 6
     cdef float c[KEY_COORDS * BLOCK]
     cdef int32_t q[KEY_COORDS * BLOCK]
     cdef uint64_t *kb
+    cdef int32_t index[KEY_COORDS * BLOCK]
+    cdef const int32_t *q0
+    cdef const int32_t *r0
+    cdef int32_t *out
+    cdef const uint64_t *p0
+    cdef const uint64_t *p1
+    cdef const uint64_t *p2
+    cdef int s0, t0, w0
+    cdef const float *dx
+    cdef const float *dy
+    cdef const float *dz
     # the table's rows (see key_table): coordinate k's low byte, then its high byte
     cdef const uint64_t *low[KEY_COORDS]
     cdef const uint64_t *high[KEY_COORDS]
@@ -220,16 +359,27 @@ cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcep
             quantise(&c[k * BLOCK], &q[k * BLOCK], m)
         # the key is the OR of one table entry per byte of each quantised coordinate
         kb = keys + (b - start)
-        if not a.low_bytes and n_coords == 6:   # the common short key: one loop, no stores
-            for j in range(m):
-                kb[j] = (high[0][q[j] >> 8] | high[1][q[BLOCK + j] >> 8]
-                         | high[2][q[2 * BLOCK + j] >> 8] | high[3][q[3 * BLOCK + j] >> 8]
-                         | high[4][q[4 * BLOCK + j] >> 8] | high[5][q[5 * BLOCK + j] >> 8])
-        elif not a.low_bytes:
-            for j in range(m):
-                kb[j] = (high[0][q[j] >> 8] | high[1][q[BLOCK + j] >> 8]
-                         | high[2][q[2 * BLOCK + j] >> 8] | high[3][q[3 * BLOCK + j] >> 8]
-                         | high[4][q[4 * BLOCK + j] >> 8])
+        if not a.low_bytes:
+            # each lookup's index (a loop the compiler vectorises), then the lookups
+            for k in range(a.n_lookups):
+                q0, r0, out = &q[a.first[k] * BLOCK], &q[a.second[k] * BLOCK], &index[k * BLOCK]
+                s0, t0, w0 = a.shift_first[k], a.shift_second[k], a.width_second[k]
+                for j in range(m):
+                    out[j] = (q0[j] >> s0) << w0 | r0[j] >> t0
+            if a.n_lookups == 3:    # the default keys: one loop, no stores
+                p0 = a.pairs[0]
+                p1 = a.pairs[1]
+                p2 = a.pairs[2]
+                for j in range(m):
+                    kb[j] = p0[index[j]] | p1[index[BLOCK + j]] | p2[index[2 * BLOCK + j]]
+            else:
+                for j in range(m):
+                    kb[j] = 0
+                for k in range(a.n_lookups):
+                    p0 = a.pairs[k]
+                    out = &index[k * BLOCK]
+                    for j in range(m):
+                        kb[j] |= p0[out[j]]
         else:                   # a long key: both bytes of every coordinate
             for j in range(m):
                 kb[j] = 0
@@ -237,10 +387,10 @@ cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcep
                 for j in range(m):
                     kb[j] |= low[k][q[k * BLOCK + j] & 255] | high[k][q[k * BLOCK + j] >> 8]
         if a.octant:            # the direction's octant first (bit k: d[k] < 0)
+            dx, dy, dz = a.d[0] + b, a.d[1] + b, a.d[2] + b
             for j in range(m):
-                kb[j] = (kb[j] >> 3 | <uint64_t> (a.d[0][b + j] < 0) << 63
-                         | <uint64_t> (a.d[1][b + j] < 0) << 62
-                         | <uint64_t> (a.d[2][b + j] < 0) << 61)
+                kb[j] = (kb[j] >> 3 | <uint64_t> (dx[j] < 0) << 63
+                         | <uint64_t> (dy[j] < 0) << 62 | <uint64_t> (dz[j] < 0) << 61)
         b += m
 
 
@@ -255,19 +405,26 @@ def _inputs(rays, str coordinates, bounds, const uint64_t[:, :, ::1] table, floa
             prev_t, float prev_scale, bint octant):
     """Check the arguments of :func:`make_keys` and :func:`sort_rays` into an :class:`_Inputs`."""
     cdef _Inputs out = _Inputs()
-    cdef int n = len(rays), k
+    cdef int n = len(rays), k, j
     if coordinates not in COORDINATES:
         raise ValueError(f"coordinates must be one of {', '.join(COORDINATES)}; "
                          f"got {coordinates!r}")
     if table.shape[0] != MAX_COORDS or table.shape[1] != 2 or table.shape[2] != 256:
         raise ValueError(f"a key table has shape ({MAX_COORDS}, 2, 256), got "
                          f"{(table.shape[0], table.shape[1], table.shape[2])}")
-    box = np.asarray(bounds, dtype=np.float32).reshape(2, 3)
-    extent = box[1] - box[0]
-    # 1 / extent, 0 on a flat (or inverted, or non-finite) axis: it carries no order
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = np.where(extent > 0, np.float32(1) / extent, 0).astype(np.float32)
-    inv[~np.isfinite(inv)] = 0
+    cdef const float[:, ::1] box = np.ascontiguousarray(bounds, dtype=np.float32).reshape(2, 3)
+    cdef float extent
+    cdef float inv[3]
+    cdef bint low_bytes = False
+    for k in range(3):
+        # 1 / extent, 0 on a flat (or inverted, or non-finite) axis: it carries no order
+        extent = box[1, k] - box[0, k]
+        inv[k] = ONE / extent if extent > 0 else 0
+        if not inv[k] < INFINITY:
+            inv[k] = 0
+    for k in range(MAX_COORDS):
+        for j in range(256):
+            low_bytes |= table[k, 0, j] != 0
     o, d = rays.origins, rays.directions
     cdef const float[::1] row
     rows = [np.ascontiguousarray(o[k]) for k in range(3)] + \
@@ -298,8 +455,10 @@ def _inputs(rays, str coordinates, bounds, const uint64_t[:, :, ::1] table, floa
     out.a.length = length
     out.a.prev_scale = prev_scale
     out.a.table = &table[0, 0, 0]
-    out.a.low_bytes = bool(np.asarray(table)[:, 0].any())
+    out.a.low_bytes = low_bytes
     out.a.octant = octant
+    if not low_bytes:
+        plan_lookups(&out.a, 5 if out.a.mode == DIR_OCTAHEDRAL else 6)
     return out
 
 
@@ -355,43 +514,79 @@ def key_table(levels):
 # ---------------------------------------------------------------------------------------
 # sorting
 
+cdef void digit_plan(uint64_t vary, int n, int floor, int *low_bit, int *width,
+                     int *passes) noexcept nogil:
+    """The radix digits that sort keys whose varying bits are ``vary``: ``passes``
+    digits of ``width`` bits, the lowest starting at bit ``low_bit``, covering every
+    bit from the highest to the lowest set bit of ``vary`` (bits that are the same in
+    every key cannot change the order).  A digit is at most :data:`MAX_DIGIT_BITS`
+    bits and has at most about as many buckets as there are keys (a histogram much
+    larger than the keys costs more to sum than a pass saves).  No digit reaches
+    below bit ``floor`` (the bottom of the sorted bits of a key that carries no
+    index in its low bits), nor above bit 63."""
+    cdef int top, bottom, span, widest = MIN_DIGIT
+    if vary == 0:
+        low_bit[0], width[0], passes[0] = 0, 1, 0
+        return
+    while widest < MAX_DIGIT and (1 << (widest + 1)) <= n:
+        widest += 1
+    top = 63 - clz64(vary)
+    bottom = ctz64(vary)
+    span = top - bottom + 1
+    passes[0] = (span + widest - 1) // widest
+    width[0] = (span + passes[0] - 1) // passes[0]
+    # the digits end at the top bit; the lowest may reach below the bottom one (those
+    # bits are the same in every key, or the ray index of a packed key: both keep the
+    # sort stable), but not below floor (then the top digit holds a few constant bits)
+    low_bit[0] = max(top + 1 - passes[0] * width[0], floor)
+
+
+def _digit_plan(uint64_t vary, int n, int floor=0):
+    """``(low_bit, width, passes)`` of :func:`digit_plan` (for the tests)."""
+    cdef int low_bit, width, passes
+    digit_plan(vary, n, floor, &low_bit, &width, &passes)
+    return low_bit, width, passes
+
+
 cdef int radix_sort(uint64_t *key, int32_t *item, uint64_t *key_tmp, int32_t *item_tmp,
-                    int n, int digits, int32_t (*count)[256]) noexcept nogil:
-    """Stable LSD radix sort of (key, item) by the top ``digits`` bytes of key; item
-    may be NULL (the item is then in the key's low bits, which no pass looks at).
-    ``count[j]`` holds the histogram of byte j (from the top) of the keys; the sort
-    uses it up.
+                    int n, int low_bit, int width, int passes, int32_t *count) noexcept nogil:
+    """Stable LSD radix sort of (key, item) by ``passes`` digits of ``width`` bits,
+    the lowest at bit ``low_bit``; item may be NULL (the item is then in the key's
+    low bits).  ``count[p << width:(p + 1) << width]`` holds the histogram of digit
+    p of the keys; the sort uses it up.
 
     Returns 1 when the result is in the tmp arrays, 0 when in key/item."""
-    cdef int i, j, shift, flip = 0
+    cdef int i, p, shift, flip = 0, buckets = 1 << width
     cdef int32_t pos, c
+    cdef int32_t *h
     cdef uint64_t *ks = key
     cdef uint64_t *kd = key_tmp
     cdef int32_t *is_ = item
     cdef int32_t *id_ = item_tmp
     cdef uint64_t *kt
     cdef int32_t *it
-    cdef uint64_t k
-    for j in range(digits - 1, -1, -1):
-        shift = 56 - 8 * j
-        if count[j][(key[0] >> shift) & 255] == n:
-            continue                # every key has this byte: the pass would not move anything
+    cdef uint64_t k, dmask = <uint64_t> buckets - 1
+    for p in range(passes):
+        shift = low_bit + p * width
+        h = count + p * buckets
+        if h[(key[0] >> shift) & dmask] == n:
+            continue                # every key has this digit: the pass would not move anything
         pos = 0
-        for i in range(256):
-            c = count[j][i]
-            count[j][i] = pos
+        for i in range(buckets):
+            c = h[i]
+            h[i] = pos
             pos += c
         if item == NULL:
             for i in range(n):
                 k = ks[i]
-                c = count[j][(k >> shift) & 255]
-                count[j][(k >> shift) & 255] = c + 1
+                c = h[(k >> shift) & dmask]
+                h[(k >> shift) & dmask] = c + 1
                 kd[c] = k
         else:
             for i in range(n):
                 k = ks[i]
-                c = count[j][(k >> shift) & 255]
-                count[j][(k >> shift) & 255] = c + 1
+                c = h[(k >> shift) & dmask]
+                h[(k >> shift) & dmask] = c + 1
                 kd[c] = k
                 id_[c] = is_[i]
             it = is_
@@ -407,14 +602,17 @@ cdef int radix_sort(uint64_t *key, int32_t *item, uint64_t *key_tmp, int32_t *it
 cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint compress,
                      int packet_size, int split_bits, int32_t *order, int32_t *offsets,
                      uint64_t *ckey, int32_t *citem, uint64_t *ckey_tmp, int32_t *citem_tmp,
-                     int32_t *cstart, uint64_t *skey) noexcept nogil:
+                     int32_t *cstart, uint64_t *skey, int32_t *count) noexcept nogil:
     """Sort rays [start, end), whose keys are keys[0, end - start), into
     order[start:end]; write sub-packet starts to offsets and return their number.
-    Work buffers hold end - start (+1) items."""
-    cdef int i, j, c, nc = 0, pos, last, flip
-    cdef uint64_t mask, low, key, prev = 0
+    Work buffers hold end - start (+1) items, ``count`` :data:`COUNT_SIZE` ints."""
+    cdef int i, j, c, nc = 0, pos, last, flip, low_bit, width, passes, buckets, shift1, shift2
+    cdef uint64_t mask, low, key, prev = 0, all_and, all_or, dmask
     cdef uint64_t *sk
     cdef int32_t *si
+    cdef int32_t *h1
+    cdef int32_t *h2
+    cdef bint cut
     # a chunk is every ray, or (compress) every run of equal keys in input order
     cdef int n = end - start, bits = 8 * digits
     # the chunk's index goes into the key's low bits, which the sort does not look at,
@@ -424,20 +622,43 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     cdef int32_t *items = NULL if packed else citem
     mask = (~(<uint64_t> 0) << (64 - bits)) if bits < 64 else ~(<uint64_t> 0)
     low = ~mask
-    cdef int32_t count[8][256]
-    cdef bint simple = packed and not compress
-    memset(count, 0, max(digits, 3) * sizeof(count[0]))
+    cdef bint simple
+    # the bits that differ between keys: only those are sorted on; and the runs of
+    # equal keys: compression pays only when they are long (the order is the same)
+    all_and, all_or = keys[0], keys[0]
+    c = 1
+    for i in range(1, n):
+        all_and &= keys[i]
+        all_or |= keys[i]
+        c += keys[i] != keys[i - 1]
+    compress = compress and 2 * c <= n
+    simple = packed and not compress
+    digit_plan((all_and ^ all_or) & mask, n, 0 if packed else 64 - bits, &low_bit, &width,
+               &passes)
+    buckets = 1 << width
+    dmask = <uint64_t> buckets - 1
+    # up to three digits are counted in one loop without tests (the histograms of
+    # digits beyond passes are counted too, and not used)
+    memset(count, 0, max(passes, 3) * buckets * sizeof(int32_t))
+    shift1 = min(low_bit + width, 63)       # (a shift by 64 would be undefined)
+    shift2 = min(low_bit + 2 * width, 63)
+    h1, h2 = count + buckets, count + 2 * buckets
     # chunks and the radix sort's histograms, in one pass (keys may be ckey itself:
     # chunk nc <= ray i is written after ray i is read)
     if simple:                      # the common case, in one tight loop
-        for i in range(n):
-            key = keys[i]
-            ckey[i] = (key & mask) | <uint64_t> i
-            count[0][key >> 56] += 1
-            count[1][(key >> 48) & 255] += digits > 1
-            count[2][(key >> 40) & 255] += digits > 2
-            for j in range(3, digits):
-                count[j][(key >> (56 - 8 * j)) & 255] += 1
+        if passes <= 3:
+            for i in range(n):
+                key = keys[i]
+                ckey[i] = (key & mask) | <uint64_t> i
+                count[(key >> low_bit) & dmask] += 1
+                h1[(key >> shift1) & dmask] += 1
+                h2[(key >> shift2) & dmask] += 1
+        else:
+            for i in range(n):
+                key = keys[i]
+                ckey[i] = (key & mask) | <uint64_t> i
+                for j in range(passes):
+                    count[j * buckets + ((key >> (low_bit + j * width)) & dmask)] += 1
         nc = n
     else:
         for i in range(n):
@@ -450,17 +671,19 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
                     citem[nc] = nc
                 cstart[nc] = start + i
                 nc += 1
-                for j in range(digits):
-                    count[j][(key >> (56 - 8 * j)) & 255] += 1
             prev = key
         cstart[nc] = end
-    flip = radix_sort(ckey, items, ckey_tmp, citem_tmp, nc, digits, count)
+        for i in range(nc):
+            key = ckey[i]
+            count[(key >> low_bit) & dmask] += 1
+            h1[(key >> shift1) & dmask] += 1
+            h2[(key >> shift2) & dmask] += 1
+            for j in range(3, passes):
+                count[j * buckets + ((key >> (low_bit + j * width)) & dmask)] += 1
+    flip = radix_sort(ckey, items, ckey_tmp, citem_tmp, nc, low_bit, width, passes, count)
     sk = ckey_tmp if flip else ckey
     si = citem_tmp if flip else citem
-    if simple:
-        for j in range(nc):
-            order[start + j] = start + <int> (sk[j] & low)
-    elif compress:
+    if compress:
         # decompress: each chunk's rays, in input order, at the chunk's sorted place
         pos = start
         for j in range(nc):
@@ -470,19 +693,25 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
                 skey[pos - start] = sk[j]
                 pos += 1
         sk = skey
-    else:
+    elif not simple:
         for j in range(nc):
             order[start + j] = start + si[j]
-    # sub-packets: at most packet_size rays, and a new one where the key's top bits change
+    # sub-packets: at most packet_size rays, and a new one where the key's top bits
+    # change; without branches (where the key changes is not predictable), the order of
+    # a packed sort read on the way
     mask = 0 if split_bits == 0 else ~(<uint64_t> 0) << (64 - split_bits)
-    c = 0
-    last = start
-    for pos in range(start, end):
-        if (pos == start or pos - last == packet_size
-                or (sk[pos - start] ^ sk[pos - start - 1]) & mask):
-            offsets[c] = pos
-            c += 1
-            last = pos
+    offsets[0] = start
+    c = 1
+    last = 0                        # (relative to start, like i)
+    if simple:
+        order[start] = start + <int> (sk[0] & low)
+    for i in range(1, n):
+        if simple:
+            order[start + i] = start + <int> (sk[i] & low)
+        cut = (i - last == packet_size) | (((sk[i] ^ sk[i - 1]) & mask) != 0)
+        offsets[c] = start + i          # kept only where cut (c moves on)
+        c += cut
+        last = pick_int(cut, i, last)
     return c
 
 
@@ -508,6 +737,7 @@ cdef object sort_packets(const KeyInputs *a, const uint64_t *keys, const int32_t
     cdef uint64_t[::1] skey = np.empty(widest, np.uint64)
     cdef int32_t[::1] citem = np.empty(widest, np.int32), citem_tmp = np.empty(widest, np.int32)
     cdef int32_t[::1] cstart = np.empty(widest + 1, np.int32)
+    cdef int32_t[::1] count = np.empty(COUNT_SIZE, np.int32)
     cdef const uint64_t *kp
     with nogil:
         for p in range(n_packets):
@@ -520,7 +750,7 @@ cdef object sort_packets(const KeyInputs *a, const uint64_t *keys, const int32_t
                 n_sub += sort_packet(kp, packets[p], packets[p + 1], digits, compress,
                                      packet_size, split_bits, &order_mv[0], &offsets_mv[n_sub],
                                      &ckey[0], &citem[0], &ckey_tmp[0], &citem_tmp[0],
-                                     &cstart[0], &skey[0])
+                                     &cstart[0], &skey[0], &count[0])
     offsets_mv[n_sub] = n
     return order[:n], offsets[:n_sub + 1].copy()
 
@@ -610,6 +840,6 @@ def _truncate(levels, bits):
 
 def scene_diagonal(bounds):
     """Length of the scene box's diagonal (0 for an empty or non-finite box)."""
-    box = np.asarray(bounds, dtype=np.float64).reshape(2, 3)
-    diag = float(np.linalg.norm(box[1] - box[0]))
-    return diag if np.isfinite(diag) else 0.0
+    lo, hi = np.asarray(bounds, dtype=np.float64).reshape(2, 3).tolist()
+    diag = math.sqrt(sum((b - a) * (b - a) for a, b in zip(lo, hi)))
+    return diag if math.isfinite(diag) else 0.0

@@ -9,8 +9,13 @@ per axis).  Per large packet the rays are then
 
 1. compressed: each run of consecutive rays with equal hash becomes one chunk
    (camera rays in tile order and the bounce rays of one surface come in runs);
-2. sorted: the chunks by hash (a stable radix sort on the hash's bytes);
+2. sorted: the chunks by hash (a stable radix sort on the hash's varying bits);
 3. decompressed: each chunk's rays, in input order, go to its sorted place.
+
+The result is a stable sort of the rays by hash; a large packet whose runs are
+short (more than half as many chunks as rays, as for diffuse bounce rays) is
+sorted without steps 1 and 3, which give the same order but would cost more
+than they save.
 
 The paper's abstract names these steps but not the bit split of the hash; the grid
 sizes and the octahedral direction map are raysort's choice.  Sub-packets are cut

@@ -66,8 +66,8 @@ class OriginDirectionSorter(KeySorter):
                                        (see the module docstring)
     lead         int     3             leading levels of origin bits (direction
                                        bits for direction_first), 0 .. 16
-    bits         int     24            key bits sorted (the top ones; a radix
-                                       pass per 8 bits), 1 .. 64
+    bits         int     24            key bits sorted (the top ones; fewer
+                                       bits, fewer radix passes), 1 .. 64
     packet_size  int     64            most rays per sub-packet (1 .. 4096)
     split_bits   int     0             also start a sub-packet where the key's
                                        top ``split_bits`` bits change (0: never)

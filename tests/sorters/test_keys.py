@@ -134,6 +134,39 @@ def test_origin_and_direction_coordinates(mode, rng):
         assert np.abs(got - want[k]).max() <= 1, f"coordinate {k}"
 
 
+def short_tables(rng):
+    """Tables that read only the coordinates' high bytes (the kernel then pairs
+    coordinates into shared lookups): the default keys' bit splits, and rows of
+    random bits that depend on the top u bits of the byte, one of them constant."""
+    from raysort.sorters.origin_direction import _levels
+    yield "aila-24", _keysort.key_table(_levels("interleaved", 3)[:7])[0]
+    yield "two-point-21", _keysort.key_table([(0, 1, 2, 3, 4, 5)] * 3 + [(0, 1, 2)])[0]
+    yield "hash", _keysort.key_table([(0, 1, 2)] * 5 + [(3, 4)] * 3)[0]
+    yield "one-coord", _keysort.key_table([(4,)] * 8)[0]
+    table = np.zeros((6, 2, 256), np.uint64)
+    for k, u in enumerate([0, 3, 8, 1, 5, 2]):
+        top = rng.integers(0, 2**63, size=1 << u, dtype=np.uint64)
+        table[k, 1] = top[np.arange(256) >> (8 - u)]
+    yield "random-rows", table
+
+
+@pytest.mark.parametrize("mode", ["components", "octahedral", "end_point"])
+def test_short_keys_are_the_table_lookups(mode, rng):
+    """Keys of tables that read only high bytes (looked up in pairs of coordinates)
+    equal the OR of the table's rows at the kernel's quantised coordinates."""
+    rays = inside_rays(rng, 1500)
+    n_coords = 5 if mode == "octahedral" else 6
+    q = np.zeros((6, len(rays)), np.int64)
+    for k in range(n_coords):
+        q[k] = quantised(mode, rays, BOX, k, length=2.5)
+    for name, table in short_tables(rng):
+        if n_coords == 5:
+            table = table.copy()
+            table[5] = 0                 # the octahedral map has no sixth coordinate
+        got = _keysort.make_keys(rays, mode, BOX, table, length=2.5)
+        assert np.array_equal(got, apply_table(table, q)), name
+
+
 @pytest.mark.parametrize("prev", [None, "some"], ids=["fixed-length", "prev_t"])
 def test_end_point_coordinates(prev, rng):
     rays = inside_rays(rng, 2000)
@@ -199,6 +232,85 @@ def test_sort_keys_is_a_stable_sort(rng, compress, digits, packet_size, split_bi
     assert np.array_equal(order, reference_order(keys, packets, digits))
     assert np.array_equal(offsets, reference_offsets(keys[order], packets, packet_size,
                                                      split_bits))
+
+
+@pytest.mark.parametrize("n", [1, 5, 300, 1024, 4096])
+def test_digit_plan_covers_the_varying_bits(n, rng):
+    """The radix digits span every bit from the highest to the lowest varying one, are
+    at most MAX_DIGIT_BITS wide, need no more passes than that width allows, and have
+    no more buckets than about the keys (at least a byte's)."""
+    assert _keysort._digit_plan(0, n)[2] == 0, "equal keys: no pass"
+    for _ in range(200):
+        top = int(rng.integers(0, 64))
+        bottom = int(rng.integers(0, top + 1))
+        vary = (1 << top) | (1 << bottom) | (int(rng.integers(0, 2**63)) & ((1 << top) - 1)
+                                             & ~((1 << bottom) - 1))
+        floor = int(rng.integers(0, bottom + 1))
+        low_bit, width, passes = _keysort._digit_plan(vary, n, floor)
+        assert floor <= low_bit <= bottom and low_bit + passes * width >= top + 1
+        assert low_bit + (passes - 1) * width < 64
+        assert 1 <= width <= _keysort.MAX_DIGIT_BITS
+        assert 1 << width <= max(n, 1 << _keysort.MIN_DIGIT_BITS)
+        widest = max(_keysort.MIN_DIGIT_BITS, min(_keysort.MAX_DIGIT_BITS, n.bit_length() - 1))
+        assert passes == -(-(top - bottom + 1) // widest)
+
+
+@pytest.mark.parametrize("compress", [False, True])
+@pytest.mark.parametrize("varying", [(0, 0), (40, 41), (40, 52), (56, 64), (30, 64), (0, 64)],
+                         ids=["equal", "one-bit", "middle", "top-byte", "top-34", "all"])
+def test_sort_keys_sorts_only_the_varying_bits(rng, compress, varying):
+    """Keys whose bits vary only in [lo, hi) (the rest the same in every key): the sort
+    skips the constant digits and still gives the stable order of the whole keys."""
+    lo, hi = varying
+    n = 6000
+    packets = np.array([0, 1, 6, 300, 1324, 5420, 6000], np.int32)
+    base = np.uint64(0xA5C3_96F0_0F69_3C5A)
+    span = np.uint64(((1 << (hi - lo)) - 1) << lo) if hi > lo else np.uint64(0)
+    keys = (base & ~span) | (rng.integers(0, 2**63, size=n, dtype=np.uint64) * np.uint64(2)
+                             + np.uint64(1)) & span
+    keys[rng.random(n) < 0.3] = base & ~span                   # runs of one key
+    # packed (the index rides in the low bits), 64-bit keys, and a split below the
+    # sorted bits (the key is not packed: its bits below the sorted ones are not sorted on)
+    for digits, split_bits in ((3, 0), (8, 0), (2, 40)):
+        order, offsets = _keysort.sort_keys(keys, packets, digits, compress=compress,
+                                            packet_size=64, split_bits=split_bits)
+        assert np.array_equal(order, reference_order(keys, packets, digits)), digits
+
+
+def morton_reference(cells, levels):
+    """Keys (left aligned) of integer coordinates ``cells[k]`` interleaved level by
+    level, most significant first, with NumPy: independent of the kernel's tables."""
+    key = np.zeros(cells.shape[1], dtype=np.uint64)
+    used, pos = [0] * len(cells), 63
+    for level in levels:
+        for coord in level:
+            bit = np.uint64(15 - used[coord])
+            key |= ((cells[coord].astype(np.uint64) >> bit) & np.uint64(1)) << np.uint64(pos)
+            used[coord] += 1
+            pos -= 1
+    return key
+
+
+@pytest.mark.parametrize("bits", [9, 12, 20, 30])
+def test_origin_keys_sort_like_numpy_argsort(bits, rng):
+    """The ``origin`` layout on origins at cell centres (so quantisation is exact): the
+    sorter's order equals a stable ``np.argsort`` of Morton keys made in NumPy.  The
+    first large packet's origins share a corner of the box (constant top digits)."""
+    n = 3000
+    cells = rng.integers(0, QMAX, size=(3, n))
+    cells[:, :1024] = cells[:, :1024] % 2**11        # one corner: top bits the same
+    lo, hi = BOX[0].astype(np.float64), BOX[1].astype(np.float64)
+    # the middle of a quantisation cell (the kernel's q = floor(c * QMAX)), well inside
+    # it after rounding to float32
+    origins = lo + (cells.T + 0.5) / QMAX * (hi - lo)
+    rays = RayBatch.from_arrays(origins, np.tile([0.3, -0.2, 0.9], (n, 1)), 0.0, np.inf)
+    sorter = OriginDirectionSorter(layout="origin", bits=bits, octant=False)
+    packets = np.array([0, 1024, 2048, 3000], np.int32)
+    order, _ = sorter.sort(rays, packets, BOX)
+    want = morton_reference(cells, [(0, 1, 2)] * 16) >> np.uint64(64 - bits)
+    ref = np.concatenate([a + np.argsort(want[a:b], kind="stable")
+                          for a, b in zip(packets[:-1], packets[1:])])
+    assert np.array_equal(order, ref)
 
 
 @pytest.mark.parametrize("name", KEY_SORTERS)
