@@ -9,6 +9,8 @@ from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.math cimport INFINITY
 from libc.string cimport memcpy
 from raysort._checks cimport offsets_bad, packet_bounds, range_bad
+import numpy as np
+
 from raysort._types cimport (rs_isa_name, RS_MAX_PACKET, RS_RAY_ROWS, RS_PACKET_ROWS,
                              RS_PACKET_T)
 
@@ -33,6 +35,32 @@ def offsets_valid(const int32_t[::1] offsets, int32_t n, int32_t max_packet=RS_M
     with nogil:
         bad = offsets_bad(&offsets[0], offsets.shape[0] - 1, n, max_packet)
     return not bad
+
+
+def fixed_offsets(const int32_t[::1] packets, int32_t size):
+    """Sub-packet offsets cutting every large packet ``[packets[i], packets[i + 1])`` into
+    runs of ``size`` rays (the last of each may be shorter; an empty packet gets none):
+    :func:`raysort.sdk.fixed_packets` in one pass, for sorter ``none``.  ``packets``
+    should not decrease (a packet that does gets no sub-packet)."""
+    cdef Py_ssize_t i, k = 0, m = packets.shape[0] - 1
+    cdef int64_t total = 1, start, length
+    if m < 0 or size < 1:
+        raise ValueError("fixed_offsets: at least one boundary and a size of 1 or more")
+    for i in range(m):
+        length = <int64_t> packets[i + 1] - packets[i]
+        if length > 0:
+            total += (length + size - 1) // size
+    out = np.empty(total, dtype=np.int32)
+    cdef int32_t[::1] offsets = out
+    with nogil:
+        for i in range(m):
+            start = packets[i]
+            while start < packets[i + 1]:
+                offsets[k] = <int32_t> start
+                k += 1
+                start += size
+        offsets[k] = packets[m]
+    return out
 
 
 def layout(const int32_t[::1] counts, int32_t[::1] starts):

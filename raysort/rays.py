@@ -154,15 +154,28 @@ class RayBatch:
     def __init__(self, n):
         if isinstance(n, bool) or not isinstance(n, numbers.Integral) or not 0 <= n <= MAX_RAYS:
             raise ConfigError(f"a ray batch holds 0..{MAX_RAYS} rays, got {n!r}")
-        n = int(n)
+        self._allocate(int(n))
+        self.data[:, :n] = 0.0
+
+    def _allocate(self, n):
+        """Rows for ``n`` rays: lanes ``[0, n)`` uninitialised, the padding set."""
         self.n = n
         self.prev_t = None
         capacity = max(_round4(n), 4)
         self.data = _recycler.take(len(RAY_ROWS) * capacity * 4).view(np.float32).reshape(
             len(RAY_ROWS), capacity)
-        self.data[:] = 0.0
+        self.data[:, n:] = 0.0
         self.data[_TMIN, n:] = np.inf
         self.data[_TMAX, n:] = -np.inf
+
+    @classmethod
+    def _unfilled(cls, n):
+        """A batch of ``n`` rays whose rows are not initialised: for a kernel that writes
+        every row of the rays it makes and then truncates the batch to them (the
+        built-in shaders), so their memory is written once.  ``n`` is trusted."""
+        batch = object.__new__(cls)
+        batch._allocate(n)
+        return batch
 
     @classmethod
     def from_arrays(cls, origins, directions, tmin=0.0, tmax=np.inf):
@@ -223,6 +236,8 @@ class RayBatch:
         """Keep the first ``n`` rays (in place; the rest become inactive padding); returns self."""
         if not 0 <= n <= self.n:
             raise ValueError(f"cannot truncate {self.n} rays to {n}")
+        self.data[_O:_O + 3, n:self.n] = 0.0          # lanes no longer rays: padding
+        self.data[_D:_D + 3, n:self.n] = 0.0
         self.data[_TMIN, n:] = np.inf
         self.data[_TMAX, n:] = -np.inf
         self.n = int(n)
