@@ -266,6 +266,17 @@ class Hits:
         self.u = np.zeros(n, dtype=np.float32)
         self.v = np.zeros(n, dtype=np.float32)
 
+    @classmethod
+    def _to_scatter(cls, n, prim):
+        """Hits of ``n`` rays in one block, ``prim`` filled with ``prim`` and ``t``, ``u``,
+        ``v`` not initialised: for a scatter that writes every ray (or is discarded)."""
+        hits = object.__new__(cls)
+        block = np.empty((4, n), dtype=np.float32)
+        hits.t, hits.u, hits.v = block[0], block[2], block[3]
+        hits.prim = block[1].view(np.int32)
+        hits.prim[:] = prim
+        return hits
+
     def __len__(self):
         return len(self.t)
 
@@ -436,7 +447,12 @@ def _scatter(packets, n, any_hit, unwritten=False, hits=None):
         out = np.full(n, kernels.UNWRITTEN_FLAG if unwritten else 0, dtype=np.uint8)
         ok = kernels.scatter_occluded(packets.prim, packets.index, out)
         return out.view(bool), ok
-    out = Hits(n, kernels.UNWRITTEN_PRIM if unwritten else -1) if hits is None else hits
+    if hits is not None:
+        out = hits
+    elif unwritten:     # every ray is written, or the result is dropped as "order"
+        out = Hits._to_scatter(n, kernels.UNWRITTEN_PRIM)
+    else:
+        out = Hits(n)
     ok = kernels.scatter(packets.rows, packets.prim, packets.u, packets.v, packets.index,
                          out.t, out.prim, out.u, out.v)
     return out, ok
