@@ -29,7 +29,8 @@
  * 256 measured: 128 and 256 alike, 0 about 10 % slower). */
 #define RS_GATHER_AHEAD 256
 
-/* RS_SW consecutive floats from p, unaligned: one row of a block of consecutive rays. */
+/* RS_SW consecutive floats from p, unaligned: one row of a block of consecutive rays
+ * (which may start anywhere; lanes.h's sw_loadu needs a multiple of 4 on SSE2). */
 RS_INLINE rs_swf rs_gather_run(const float *p)
 {
 #if RS_ISA_AVX512
