@@ -63,6 +63,39 @@ def fixed_offsets(const int32_t[::1] packets, int32_t size):
     return out
 
 
+def follow_paths(const int32_t[::1] parent, const int32_t[::1] pixel,
+                 const int32_t[::1] sample, const int32_t[::1] slot, const float[::1] t):
+    """``(pixel, sample, slot, t)`` of the rays ``parent`` (each an index into the four
+    arrays): the paths a shader's next rays continue and the hit distance each path
+    ended its last ray at, in one pass (``Paths.take`` and ``t[parent]``).  IndexError,
+    with nothing returned, at a parent out of range."""
+    cdef Py_ssize_t i, m = parent.shape[0]
+    cdef uint32_t n = pixel.shape[0]
+    cdef int32_t p
+    cdef int bad = 0
+    if sample.shape[0] != n or slot.shape[0] != n or t.shape[0] != n:
+        raise ValueError("follow_paths: pixel, sample, slot and t must be of one length")
+    new_pixel = np.empty(m, dtype=np.int32)
+    new_sample = np.empty(m, dtype=np.int32)
+    new_slot = np.empty(m, dtype=np.int32)
+    new_t = np.empty(m, dtype=np.float32)
+    cdef int32_t[::1] o_pixel = new_pixel, o_sample = new_sample, o_slot = new_slot
+    cdef float[::1] o_t = new_t
+    with nogil:
+        for i in range(m):
+            p = parent[i]
+            if <uint32_t> p >= n:
+                bad = 1
+                break
+            o_pixel[i] = pixel[p]
+            o_sample[i] = sample[p]
+            o_slot[i] = slot[p]
+            o_t[i] = t[p]
+    if bad:
+        raise IndexError(f"follow_paths: parent[{i}] = {parent[i]} is out of range 0..{n - 1}")
+    return new_pixel, new_sample, new_slot, new_t
+
+
 def layout(const int32_t[::1] counts, int32_t[::1] starts):
     """``starts[k]``: where sub-packet k of ``counts[k]`` rays starts, each at a multiple
     of 4 after the one before; returns the lanes they take (at least 4)."""

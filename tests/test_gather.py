@@ -245,3 +245,23 @@ def test_a_new_ray_batch_starts_clean_in_recycled_memory():
     assert (fresh.data[RayRow.tmin, n:] == np.inf).all()
     assert (fresh.data[RayRow.tmax, n:] == -np.inf).all()
     assert (held.data == 7.0).all()
+
+
+def test_follow_paths_is_fancy_indexing_and_refuses_a_parent_out_of_range():
+    """The paths' bookkeeping after a shade: pixel, sample, slot and t of each parent,
+    as NumPy's indexing gives them; a parent out of range is an IndexError."""
+    from raysort._gather import follow_paths
+
+    rng = np.random.default_rng(5)
+    n = 1000
+    pixel, sample, slot = (rng.integers(0, 2**31 - 1, n).astype(np.int32) for _ in range(3))
+    t = rng.random(n).astype(np.float32)
+    t[::7] = np.inf
+    for parent in (np.sort(rng.integers(0, n, 700)), np.arange(n), np.zeros(0)):
+        parent = parent.astype(np.int32)
+        got = follow_paths(parent, pixel, sample, slot, t)
+        for mine, array in zip(got, (pixel, sample, slot, t)):
+            assert mine.dtype == array.dtype and np.array_equal(mine, array[parent])
+    for bad in (-1, n):
+        with pytest.raises(IndexError, match="out of range"):
+            follow_paths(np.array([0, bad], np.int32), pixel, sample, slot, t)
