@@ -9,10 +9,10 @@ from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.math cimport INFINITY
 from libc.string cimport memcpy
 from raysort._checks cimport offsets_bad, packet_bounds, range_bad
-import numpy as np
-
 from raysort._types cimport (rs_isa_name, RS_MAX_PACKET, RS_RAY_ROWS, RS_PACKET_ROWS,
                              RS_PACKET_T)
+
+import numpy as np
 
 
 cdef extern from "raysort/gather.h" nogil:

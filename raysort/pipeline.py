@@ -32,9 +32,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from raysort import contract, isa, registry
+from raysort._gather import follow_paths as _follow_paths
 from raysort.bvh import BVH
 from raysort.errors import ConfigError
-from raysort._gather import follow_paths as _follow_paths
 from raysort.params import boolean, integer
 from raysort.paths import Paths
 from raysort.progress import with_rays
