@@ -12,6 +12,8 @@ from raysort._checks cimport offsets_bad, packet_bounds, range_bad
 from raysort._types cimport (rs_isa_name, RS_MAX_PACKET, RS_RAY_ROWS, RS_PACKET_ROWS,
                              RS_PACKET_T)
 
+import numpy as np
+
 
 cdef extern from "raysort/gather.h" nogil:
     int64_t rs_gather_lanes(float *const dst[RS_PACKET_ROWS], int32_t *prim, float *u,
@@ -33,6 +35,65 @@ def offsets_valid(const int32_t[::1] offsets, int32_t n, int32_t max_packet=RS_M
     with nogil:
         bad = offsets_bad(&offsets[0], offsets.shape[0] - 1, n, max_packet)
     return not bad
+
+
+def fixed_offsets(const int32_t[::1] packets, int32_t size):
+    """Sub-packet offsets cutting every large packet ``[packets[i], packets[i + 1])`` into
+    runs of ``size`` rays (the last of each may be shorter; an empty packet gets none):
+    :func:`raysort.sdk.fixed_packets` in one pass, for sorter ``none``.  ``packets``
+    should not decrease (a packet that does gets no sub-packet)."""
+    cdef Py_ssize_t i, k = 0, m = packets.shape[0] - 1
+    cdef int64_t total = 1, start, length
+    if m < 0 or size < 1:
+        raise ValueError("fixed_offsets: at least one boundary and a size of 1 or more")
+    for i in range(m):
+        length = <int64_t> packets[i + 1] - packets[i]
+        if length > 0:
+            total += (length + size - 1) // size
+    out = np.empty(total, dtype=np.int32)
+    cdef int32_t[::1] offsets = out
+    with nogil:
+        for i in range(m):
+            start = packets[i]
+            while start < packets[i + 1]:
+                offsets[k] = <int32_t> start
+                k += 1
+                start += size
+        offsets[k] = packets[m]
+    return out
+
+
+def follow_paths(const int32_t[::1] parent, const int32_t[::1] pixel,
+                 const int32_t[::1] sample, const int32_t[::1] slot, const float[::1] t):
+    """``(pixel, sample, slot, t)`` of the rays ``parent`` (each an index into the four
+    arrays): the paths a shader's next rays continue and the hit distance each path
+    ended its last ray at, in one pass (``Paths.take`` and ``t[parent]``).  IndexError,
+    with nothing returned, at a parent out of range."""
+    cdef Py_ssize_t i, m = parent.shape[0]
+    cdef uint32_t n = pixel.shape[0]
+    cdef int32_t p
+    cdef int bad = 0
+    if sample.shape[0] != n or slot.shape[0] != n or t.shape[0] != n:
+        raise ValueError("follow_paths: pixel, sample, slot and t must be of one length")
+    new_pixel = np.empty(m, dtype=np.int32)
+    new_sample = np.empty(m, dtype=np.int32)
+    new_slot = np.empty(m, dtype=np.int32)
+    new_t = np.empty(m, dtype=np.float32)
+    cdef int32_t[::1] o_pixel = new_pixel, o_sample = new_sample, o_slot = new_slot
+    cdef float[::1] o_t = new_t
+    with nogil:
+        for i in range(m):
+            p = parent[i]
+            if <uint32_t> p >= n:
+                bad = 1
+                break
+            o_pixel[i] = pixel[p]
+            o_sample[i] = sample[p]
+            o_slot[i] = slot[p]
+            o_t[i] = t[p]
+    if bad:
+        raise IndexError(f"follow_paths: parent[{i}] = {parent[i]} is out of range 0..{n - 1}")
+    return new_pixel, new_sample, new_slot, new_t
 
 
 def layout(const int32_t[::1] counts, int32_t[::1] starts):

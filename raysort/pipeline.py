@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from raysort import contract, isa, registry
+from raysort._gather import follow_paths as _follow_paths
 from raysort.bvh import BVH
 from raysort.errors import ConfigError
 from raysort.params import boolean, integer
@@ -527,10 +528,13 @@ class Pipeline:
                                         depth)
                 clock.lap(None)             # the shadow rays' stages timed themselves
                 packets = np.searchsorted(bounce.parent, packets).astype(np.int32)
-                paths = paths.take(bounce.parent, bounce.throughput)
+                pixel, sample, slot, last_t = _follow_paths(
+                    np.ascontiguousarray(bounce.parent, dtype=np.int32), paths.pixel,
+                    paths.sample, paths.slot, hits.t)
+                paths = Paths(pixel, sample, slot, bounce.throughput)
                 rays, maker = bounce.rays, ("shaders", self.shader, "Bounce.rays")
                 if rays.prev_t is None:     # each path's last hit distance, for sorters
-                    rays.prev_t = hits.t[bounce.parent]
+                    rays.prev_t = last_t
                 clock.lap("shade")          # the paths' bookkeeping counts as shading
                 depth += 1
                 if depth > MAX_BOUNCES and len(rays):

@@ -154,15 +154,28 @@ class RayBatch:
     def __init__(self, n):
         if isinstance(n, bool) or not isinstance(n, numbers.Integral) or not 0 <= n <= MAX_RAYS:
             raise ConfigError(f"a ray batch holds 0..{MAX_RAYS} rays, got {n!r}")
-        n = int(n)
+        self._allocate(int(n))
+        self.data[:, :n] = 0.0
+
+    def _allocate(self, n):
+        """Rows for ``n`` rays: lanes ``[0, n)`` uninitialised, the padding set."""
         self.n = n
         self.prev_t = None
         capacity = max(_round4(n), 4)
         self.data = _recycler.take(len(RAY_ROWS) * capacity * 4).view(np.float32).reshape(
             len(RAY_ROWS), capacity)
-        self.data[:] = 0.0
+        self.data[:, n:] = 0.0
         self.data[_TMIN, n:] = np.inf
         self.data[_TMAX, n:] = -np.inf
+
+    @classmethod
+    def _unfilled(cls, n):
+        """A batch of ``n`` rays whose rows are not initialised: for a kernel that writes
+        every row of the rays it makes and then truncates the batch to them (the
+        built-in shaders), so their memory is written once.  ``n`` is trusted."""
+        batch = object.__new__(cls)
+        batch._allocate(n)
+        return batch
 
     @classmethod
     def from_arrays(cls, origins, directions, tmin=0.0, tmax=np.inf):
@@ -223,6 +236,8 @@ class RayBatch:
         """Keep the first ``n`` rays (in place; the rest become inactive padding); returns self."""
         if not 0 <= n <= self.n:
             raise ValueError(f"cannot truncate {self.n} rays to {n}")
+        self.data[_O:_O + 3, n:self.n] = 0.0          # lanes no longer rays: padding
+        self.data[_D:_D + 3, n:self.n] = 0.0
         self.data[_TMIN, n:] = np.inf
         self.data[_TMAX, n:] = -np.inf
         self.n = int(n)
@@ -250,6 +265,17 @@ class Hits:
         self.prim = np.full(n, _prim, dtype=np.int32)
         self.u = np.zeros(n, dtype=np.float32)
         self.v = np.zeros(n, dtype=np.float32)
+
+    @classmethod
+    def _to_scatter(cls, n, prim):
+        """Hits of ``n`` rays in one block, ``prim`` filled with ``prim`` and ``t``, ``u``,
+        ``v`` not initialised: for a scatter that writes every ray (or is discarded)."""
+        hits = object.__new__(cls)
+        block = np.empty((4, n), dtype=np.float32)
+        hits.t, hits.u, hits.v = block[0], block[2], block[3]
+        hits.prim = block[1].view(np.int32)
+        hits.prim[:] = prim
+        return hits
 
     def __len__(self):
         return len(self.t)
@@ -421,7 +447,12 @@ def _scatter(packets, n, any_hit, unwritten=False, hits=None):
         out = np.full(n, kernels.UNWRITTEN_FLAG if unwritten else 0, dtype=np.uint8)
         ok = kernels.scatter_occluded(packets.prim, packets.index, out)
         return out.view(bool), ok
-    out = Hits(n, kernels.UNWRITTEN_PRIM if unwritten else -1) if hits is None else hits
+    if hits is not None:
+        out = hits
+    elif unwritten:     # every ray is written, or the result is dropped as "order"
+        out = Hits._to_scatter(n, kernels.UNWRITTEN_PRIM)
+    else:
+        out = Hits(n)
     ok = kernels.scatter(packets.rows, packets.prim, packets.u, packets.v, packets.index,
                          out.t, out.prim, out.u, out.v)
     return out, ok

@@ -99,6 +99,37 @@ def test_gather_follows_the_rules_on_every_isa(each_isa, n):
         assert bad_ray == want_bad
 
 
+def runs(rng, n):
+    """An order of consecutive runs (some longer than a SIMD block, some not) in shuffled
+    places, with single rays between them."""
+    pieces, start = [], 0
+    while start < n:
+        length = min(n - start, int(rng.choice([1, 3, 8, 9, 16, 17, 40])))
+        pieces.append(np.arange(start, start + length))
+        start += length
+    rng.shuffle(pieces)
+    return np.concatenate(pieces or [np.zeros(0)]).astype(np.int32)
+
+
+@pytest.mark.parametrize("n", [1, 5, 8, 16, 17, 64, 100, 257, 1000])
+def test_runs_of_consecutive_rays_gather_by_the_same_rules(each_isa, n):
+    """Blocks of consecutive rays (an unsorted batch) are loaded rather than gathered: the
+    packets are still the reference's, bit for bit, for the input order and for runs."""
+    rng = np.random.default_rng(n)
+    rays = hostile_rays(rng, n)
+    big = np.array([0, n], np.int32)
+    for order in (np.arange(n, dtype=np.int32), runs(rng, n)):
+        for offsets in (np.arange(0, n + 64, 64).clip(max=n).astype(np.int32), split(rng, n)):
+            offsets = np.unique(offsets)
+            want_rows, want_index, want_bad = reference(rays, order, offsets)
+            p, tmax, bad_ray = gather_checked(rays, order, offsets, big, keep_tmax=True,
+                                              max_packet=max(n, 1))
+            assert np.array_equal(p.index, want_index)
+            assert np.array_equal(bits(p.rows), bits(want_rows))
+            assert np.array_equal(bits(tmax), bits(want_rows[PacketRow.t]))
+            assert bad_ray == want_bad
+
+
 def test_the_special_rays_reach_every_rule():
     """The hostile batches hold what the rules distinguish (else the test above is weak)."""
     rays = hostile_rays(np.random.default_rng(1000), 1000)
@@ -214,3 +245,23 @@ def test_a_new_ray_batch_starts_clean_in_recycled_memory():
     assert (fresh.data[RayRow.tmin, n:] == np.inf).all()
     assert (fresh.data[RayRow.tmax, n:] == -np.inf).all()
     assert (held.data == 7.0).all()
+
+
+def test_follow_paths_is_fancy_indexing_and_refuses_a_parent_out_of_range():
+    """The paths' bookkeeping after a shade: pixel, sample, slot and t of each parent,
+    as NumPy's indexing gives them; a parent out of range is an IndexError."""
+    from raysort._gather import follow_paths
+
+    rng = np.random.default_rng(5)
+    n = 1000
+    pixel, sample, slot = (rng.integers(0, 2**31 - 1, n).astype(np.int32) for _ in range(3))
+    t = rng.random(n).astype(np.float32)
+    t[::7] = np.inf
+    for parent in (np.sort(rng.integers(0, n, 700)), np.arange(n), np.zeros(0)):
+        parent = parent.astype(np.int32)
+        got = follow_paths(parent, pixel, sample, slot, t)
+        for mine, array in zip(got, (pixel, sample, slot, t)):
+            assert mine.dtype == array.dtype and np.array_equal(mine, array[parent])
+    for bad in (-1, n):
+        with pytest.raises(IndexError, match="out of range"):
+            follow_paths(np.array([0, bad], np.int32), pixel, sample, slot, t)

@@ -105,6 +105,27 @@ def test_shadow_rays_identical_for_every_traversal(sibenik, traversal):
     assert np.array_equal(base.image.view(np.uint32), other.image.view(np.uint32))
 
 
+@pytest.fixture(scope="module")
+def forest():
+    return raysort.load_scene("forest")
+
+
+@pytest.mark.parametrize("shader", ["lambert", {"type": "lambert", "shadow_rays": True},
+                                    {"type": "lambert", "max_depth": 0}, "ao"])
+@pytest.mark.parametrize("scene_name", ["sibenik", "forest"])
+def test_the_lean_paths_leave_the_image_unchanged(request, scene_name, shader):
+    """The frame's fast paths (sorter none's consecutive rays loaded, not gathered; the
+    shaders' rays written once; the checks skipped for trusted plugins) against the
+    general path: rays sorted by nah, gathered one by one, every result checked."""
+    scene = request.getfixturevalue(scene_name)
+    images = [_render(scene, shader=shader, size=(37, 29), spp=3, **kw).image
+              for kw in ({}, {"check_plugins": False}, {"sorter": "nah"},
+                         {"sorter": "none:packet_size=1024", "check_plugins": False})]
+    for image in images[1:]:
+        assert np.array_equal(image.view(np.uint32), images[0].view(np.uint32))
+    assert images[0].any()
+
+
 def test_thread_count_does_not_change_the_image(sibenik, sibenik_reference):
     for threads in (2, 3):
         image = _render(sibenik, threads=threads, traversal="ranged", sorter="nah").image

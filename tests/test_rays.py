@@ -175,6 +175,28 @@ def test_truncate(rng):
             b.truncate(k)
 
 
+@pytest.mark.parametrize("n", [1, 5, 4097])
+def test_an_unfilled_batch_written_then_truncated_has_clean_padding(rng, n):
+    """RayBatch._unfilled (the shaders' output): the layout of RayBatch(n); after its
+    writer truncates it, the lanes past the kept rays are padding as RayBatch's are
+    (zero origin and direction, inactive), whatever the memory held before."""
+    for _ in range(3):      # recycled memory full of old rays
+        random_rays(rng, n, BOX)
+    b = RayBatch._unfilled(n)
+    assert b.data.shape == RayBatch(n).data.shape and b.prev_t is None
+    assert ((b.data[RayRow.tmin, n:] == np.inf).all()
+            and (b.data[RayRow.tmax, n:] == -np.inf).all())
+    b.data[:, :n] = random_rays(rng, n, BOX).data[:, :n]
+    k = n // 2
+    kept = b.data[:, :k].copy()
+    b.truncate(k)
+    assert np.array_equal(bits(b.data[:, :k]), bits(kept))
+    rows = [RayRow.ox, RayRow.oy, RayRow.oz, RayRow.dx, RayRow.dy, RayRow.dz]
+    assert (bits(b.data[rows, k:]) == 0).all()
+    assert ((b.data[RayRow.tmin, k:] == np.inf).all()
+            and (b.data[RayRow.tmax, k:] == -np.inf).all())
+
+
 def test_hits_defaults():
     """Hits(n): t=+inf float32, prim=-1 int32, u=v=0 float32."""
     h = Hits(5)

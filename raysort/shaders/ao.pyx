@@ -135,7 +135,7 @@ class AOShader(Shader):
         _, normals, distance = self._prepared
         n = len(rays)
         m_max = n * self.samples
-        ao_rays = RayBatch(m_max)
+        ao_rays = RayBatch._unfilled(m_max)      # _ao writes every row of its rays
         ao_parent = np.empty(m_max, dtype=np.int32)
         ao_slot = np.empty(m_max, dtype=np.int32)
         ao_weight = np.empty((3, m_max), dtype=np.float32)

@@ -227,11 +227,12 @@ class LambertShader(Shader):
             self.prepare(scene)
         _, faces, light_pos, light_int = self._prepared
         n = len(rays)
-        next_rays = RayBatch(n)
-        next_parent = np.empty(n, dtype=np.int32)
-        next_thr = np.empty((3, n), dtype=np.float32)
+        k_max = n if depth < self.max_depth else 0     # the last depth makes no bounce
+        next_rays = RayBatch._unfilled(k_max)    # _shade writes every row of its rays
+        next_parent = np.empty(k_max, dtype=np.int32)
+        next_thr = np.empty((3, k_max), dtype=np.float32)
         m_max = n * len(light_pos)
-        sh_rays = RayBatch(m_max)
+        sh_rays = RayBatch._unfilled(m_max)
         sh_parent = np.empty(m_max, dtype=np.int32)
         sh_slot = np.empty(m_max, dtype=np.int32)
         sh_contrib = np.empty((3, m_max), dtype=np.float32)

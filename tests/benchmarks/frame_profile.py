@@ -1,12 +1,14 @@
 """Where a frame's CPU goes, and what a second thread buys.
 
-Renders one scene with the default pipeline (``nah`` + ``wide`` + ``lambert``) and
-reports, from the render's own per-stage thread-CPU timers
-(``RenderStats.stage_seconds``), each stage's share of the frame's CPU and the
-framework's share (every stage but ``traverse``: shade, check, gather, sort,
-generate, scatter).  Then it times whole frames with 1 and 2 threads, interleaved in
-one process (a warm-up round, the order rotated every round) and prints medians with
-their spread and the per-round speed-up.  Images are compared bit for bit.
+Renders one scene with the default pipeline (``Pipeline(scene)``: sorter ``none``, the
+traversal of :func:`raysort.pipeline.default_traversal`, ``lambert``) and reports, from
+the render's own per-stage thread-CPU timers (``RenderStats.stage_seconds``), each
+stage's median over ``--stage-rounds`` frames (after a small warm-up frame, which builds
+the trees the traversal reads), its share of the frame's CPU and the framework's share
+(every stage but ``traverse``: shade, check, gather, sort, generate, scatter).  Then it
+times whole frames with 1 and 2 threads, interleaved in one process (a warm-up round,
+the order rotated every round) and prints medians with their spread and the per-round
+speed-up.  Images are compared bit for bit.
 
     python tests/benchmarks/frame_profile.py                  # sibenik 512x512, 4 spp
     python tests/benchmarks/frame_profile.py --size 1024 --spp 4 --rounds 5
@@ -42,12 +44,15 @@ def render(pipe, args):
     return result, time.perf_counter() - start
 
 
-def stage_table(stats):
-    total = sum(stats.stage_seconds.values())
-    print(f"  {'stage':<10}{'CPU s':>9}{'share':>8}")
-    for stage, seconds in sorted(stats.stage_seconds.items(), key=lambda kv: -kv[1]):
-        print(f"  {stage:<10}{seconds:9.3f}{seconds / total:8.1%}")
-    framework = total - stats.stage_seconds.get("traverse", 0.0)
+def stage_table(runs):
+    """Each stage's median CPU seconds over the renders ``runs`` (their RenderStats)."""
+    seconds = {stage: statistics.median(r.stage_seconds[stage] for r in runs)
+               for stage in runs[0].stage_seconds}
+    total = sum(seconds.values())
+    print(f"  {'stage':<10}{'CPU s':>9}{'share':>8}   (median of {len(runs)} frames)")
+    for stage, value in sorted(seconds.items(), key=lambda kv: -kv[1]):
+        print(f"  {stage:<10}{value:9.3f}{value / total:8.1%}")
+    framework = total - seconds.get("traverse", 0.0)
     print(f"  framework (all but traverse): {framework:.3f} s = {framework / total:.1%} of "
           f"{total:.3f} CPU s")
 
@@ -58,14 +63,15 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=512, help="image edge in pixels (512)")
     parser.add_argument("--spp", type=int, default=4, help="samples per pixel (4)")
     parser.add_argument("--rounds", type=int, default=5, help="timed rounds (5)")
+    parser.add_argument("--stage-rounds", type=int, default=3,
+                        help="one-thread frames the stage table is the median of (3)")
     parser.add_argument("--no-threads", action="store_true", help="skip the 2-thread part")
     args = parser.parse_args(argv)
 
     scene = raysort.load_scene(args.scene)
     pipes = {n: raysort.Pipeline(scene, threads=n) for n in (1, 2)}
-    pipes[1].bvh
+    pipes[1].render(8, 8, spp=1)        # builds the BVH and the trees the traversal reads
     pipes[2]._bvh = pipes[1].bvh        # one BVH for both (built once, read only)
-    pipes[1].bvh.wide
     try:
         load = os.getloadavg()
     except OSError:
@@ -75,9 +81,11 @@ def main(argv=None):
     print(f"machine: {cpu_name()} ({os.cpu_count()} cores), ISA {isa.active()}, "
           f"load average before: {load}")
 
-    result, seconds = render(pipes[1], args)
-    print(f"\none thread: {seconds:.2f} s wall, {result.stats.total_rays:,} rays")
-    stage_table(result.stats)
+    runs = [render(pipes[1], args) for _ in range(max(1, args.stage_rounds))]
+    result = runs[0][0]
+    print(f"\none thread: {statistics.median(s for _, s in runs):.2f} s wall (median), "
+          f"{result.stats.total_rays:,} rays")
+    stage_table([res.stats for res, _ in runs])
     if args.no_threads:
         return
 

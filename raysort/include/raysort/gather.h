@@ -29,8 +29,36 @@
  * 256 measured: 128 and 256 alike, 0 about 10 % slower). */
 #define RS_GATHER_AHEAD 256
 
+/* RS_SW consecutive floats from p, unaligned: one row of a block of consecutive rays
+ * (which may start anywhere; lanes.h's sw_loadu needs a multiple of 4 on SSE2). */
+RS_INLINE rs_swf rs_gather_run(const float *p)
+{
+#if RS_ISA_AVX512
+    return _mm512_loadu_ps(p);
+#elif RS_ISA_AVX2
+    return _mm256_loadu_ps(p);
+#elif RS_SSE
+    return _mm_loadu_ps(p);
+#else
+    return *p;
+#endif
+}
+
+/* Whether the lanes ids[j..j + RS_SW) hold consecutive rays (no padding): the rays
+ * of an unsorted batch (sorter `none`), whose rows load as vectors instead of
+ * lane by lane. */
+RS_INLINE int rs_gather_is_run(const int32_t *ids, int64_t j)
+{
+    const int64_t first = ids[j];
+    int run = first >= 0;
+    for (int k = 1; k < RS_SW; ++k)
+        run &= ids[j + k] == first + k;
+    return run;
+}
+
 /* Lanes [j, j + RS_SW) of the packet rows from the rays ids[j..]: a padding lane
- * reads ray 0 (every batch holds at least one lane) and discards it.  Returns the
+ * reads ray 0 (every batch holds at least one lane) and discards it; a block of
+ * consecutive rays is loaded, not gathered (the same values).  Returns the
  * lanes (bits) holding a ray that breaks the ray contract: active (tmin < tmax)
  * yet with tmin < 0 or a non-finite origin or direction (stored inactive). */
 RS_INLINE int rs_gather_block(float *const dst[RS_PACKET_ROWS], int32_t *prim, float *u,
@@ -41,8 +69,12 @@ RS_INLINE int rs_gather_block(float *const dst[RS_PACKET_ROWS], int32_t *prim, f
     const rs_swm padding = sw_lti(id, none);
     const rs_swi ray = sw_blendi(padding, none, id);
     rs_swf row[RS_RAY_ROWS];
-    for (int c = 0; c < RS_RAY_ROWS; ++c)
-        row[c] = sw_gather(src[c], ray);
+    if (rs_gather_is_run(ids, j))
+        for (int c = 0; c < RS_RAY_ROWS; ++c)
+            row[c] = rs_gather_run(src[c] + ids[j]);
+    else
+        for (int c = 0; c < RS_RAY_ROWS; ++c)
+            row[c] = sw_gather(src[c], ray);
     const rs_swf zero = sw_set1(0.0f), inf = sw_set1(INFINITY);
     rs_swm good = sw_ge(row[RS_RAY_TMIN], zero);
     for (int a = 0; a < 3; ++a) {   /* finite: |x| < inf, false for NaN */
@@ -85,10 +117,11 @@ static int64_t rs_gather_lanes(float *const dst[RS_PACKET_ROWS], int32_t *prim, 
     int64_t j = 0, first_bad = -1;
     int bits;
     for (; j + RS_SW <= capacity; j += RS_SW) {
-        /* the rays of a block further on: sorted rays are random accesses */
+        /* the rays of a block further on: sorted rays are random accesses (a ray
+         * following the lane before's is in a stream, which the hardware fetches) */
         for (int k = 0; k < RS_SW && j + RS_GATHER_AHEAD + k < capacity; ++k) {
             int32_t s = index[j + RS_GATHER_AHEAD + k];
-            if (s >= 0)
+            if (s >= 0 && (k == 0 || s != index[j + RS_GATHER_AHEAD + k - 1] + 1))
                 for (int c = 0; c < RS_RAY_ROWS; ++c)
                     rs_prefetch(src[c] + s);
         }
