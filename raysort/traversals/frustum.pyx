@@ -6,9 +6,9 @@ interval-arithmetic test of the chunk's frustum (the ranges of its origins and
 reciprocal directions, as DynBVH's IA test) checks all eight child boxes of a node
 at once, and the children kept are visited nearest first; at a leaf, the chunk's
 rays meet the leaf's box in SIMD groups of rays and each ray that enters it meets
-the leaf's triangle groups as in ``wide8``.  A chunk that is not coherent (its
-directions change sign on two axes or more, or spread by more than 0.25 in a
-component) is traced one ray at a time as ``wide8`` does.
+the leaf's triangle groups as in ``wide8``.  A chunk that is not coherent (fewer
+than 16 active rays, directions that change sign on two axes or more, or spread by
+more than 0.25 in a component) is traced one ray at a time as ``wide8`` does.
 The kernel is ``raysort/include/raysort/frustum.h``.
 """
 from libc.stdint cimport int32_t
@@ -67,8 +67,9 @@ class FrustumTraversal(Traversal):
     first, and boxes behind every ray's closest hit are skipped; at a leaf, each
     ray that enters the leaf's box (SIMD over rays) meets its triangle groups
     eight triangles at a time, as in ``wide8``.  Chunks that are not coherent
-    (directions that change sign on two axes or more, or whose components spread
-    by more than 0.25) are traced one ray at a time, as ``wide8`` does, so
+    (fewer than 16 active rays, directions that change sign on two axes or more,
+    or whose components spread by more than 0.25) are traced one ray at a time,
+    as ``wide8`` does, so
     incoherent rays cost about what ``wide8`` costs.  Exact on every ISA.
 
     Counts N_IA (one 8-box interval test per node visited by a chunk), SIMD N_B
