@@ -91,7 +91,7 @@ typedef __m256i rs_swi;
 RS_INLINE rs_swi sw_ids(const int32_t *p) { return _mm256_loadu_si256((const __m256i *)p); }
 RS_INLINE rs_swf sw_gather(const float *base, rs_swi id) { return _mm256_i32gather_ps(base, id, 4); }
 /* The same lanes as sw_gather by eight scalar loads: on Zen 3 the stream traversal,
- * which gathers seven rows per group of rays at every node, ran 15-20 % faster so
+ * which gathers seven rows per group of rays at every node, ran 8-15 % faster so
  * (BENCHMARKS.md §13); AVX-512's gathers are kept. */
 RS_INLINE rs_swf sw_gather_loads(const float *base, rs_swi id)
 {
