@@ -9,9 +9,10 @@
  * group at a time (rs_box1's operations per lane), and each ray that enters it
  * meets the leaf's triangle groups as in `wide8` (rs_tri8_hit).  A box waiting
  * on the stack is dropped once every ray of the chunk has a hit closer than
- * where the chunk can first enter it.  A chunk whose directions do not keep
- * their sign on at least two axes (incoherent rays: the frustum would cull
- * nothing) is traced one ray at a time, as `wide8` does.
+ * where the chunk can first enter it.  A chunk that is not coherent (fewer
+ * than RS_FRUSTUM_MIN_RAYS active rays, directions that do not keep their sign
+ * on two axes, or that spread wider than RS_FRUSTUM_SPREAD: the walk would
+ * cost more than it shares) is traced one ray at a time, as `wide8` does.
  *
  * Exactness: the interval test only culls a box that no ray's own slab test
  * would enter (rounding is monotone, so the bounds computed from the ranges'
@@ -193,8 +194,7 @@ RS_INLINE void rs_frustum_insert(rs_frustum_entry *hit, int m, rs_frustum_entry 
 
 /* Does the frustum of a chunk pay (RS_FRUSTUM_MIN_RAYS active rays or more,
  * whose directions keep their sign, finite and non-zero, on two axes or more,
- * and spread by at most RS_FRUSTUM_SPREAD
- * on every axis)?  (Measured on Sibenik: with 0.25 camera rays and shadow rays
+ * and spread by at most RS_FRUSTUM_SPREAD on every axis)?  (Measured on Sibenik: with 0.25 camera rays and shadow rays
  * to the lamp take the walk, direction-sorted diffuse rays, which it would slow
  * down several times, do not.)  Otherwise it is traced one ray at a time. */
 RS_INLINE int rs_frustum_coherent(const rs_frustum_bounds *b)
