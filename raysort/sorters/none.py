@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from raysort._gather import fixed_offsets
 from raysort.sdk import MAX_PACKET, Sorter, fixed_packets, integer
 
 __all__ = ["NoneSorter"]
@@ -31,7 +30,4 @@ class NoneSorter(Sorter):
 
     def sort(self, rays, packets, bounds):
         order = np.arange(len(rays), dtype=np.int32)
-        if isinstance(packets, np.ndarray) and packets.dtype == np.int32:
-            # fixed_packets' offsets in one C pass: a frame's packets are int32
-            return order, fixed_offsets(np.ascontiguousarray(packets), self.packet_size)
         return order, fixed_packets(packets, self.packet_size)

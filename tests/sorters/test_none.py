@@ -24,7 +24,7 @@ def test_offsets_are_fixed_packets_and_the_order_is_the_input(seed):
         packets = large_packets(rng, size)
         n = int(packets[-1])
         sorter = raysort.create("sorters", f"none:packet_size={size}")
-        want = fixed_packets(packets, size)
+        want = fixed_packets(packets.tolist(), size)     # the NumPy path: a list
         for given in (packets, packets.astype(np.int64), packets.tolist()):
             order, offsets = sorter.sort(RayBatch(n), given, None)
             assert order.dtype == offsets.dtype == np.int32
