@@ -29,21 +29,6 @@
  * 256 measured: 128 and 256 alike, 0 about 10 % slower). */
 #define RS_GATHER_AHEAD 256
 
-/* RS_SW consecutive floats from p, unaligned: one row of a block of consecutive rays
- * (which may start anywhere; lanes.h's sw_loadu needs a multiple of 4 on SSE2). */
-RS_INLINE rs_swf rs_gather_run(const float *p)
-{
-#if RS_ISA_AVX512
-    return _mm512_loadu_ps(p);
-#elif RS_ISA_AVX2
-    return _mm256_loadu_ps(p);
-#elif RS_SSE
-    return _mm_loadu_ps(p);
-#else
-    return *p;
-#endif
-}
-
 /* Whether the lanes ids[j..j + RS_SW) hold consecutive rays (no padding): the rays
  * of an unsorted batch (sorter `none`), whose rows load as vectors instead of
  * lane by lane. */
@@ -71,7 +56,7 @@ RS_INLINE int rs_gather_block(float *const dst[RS_PACKET_ROWS], int32_t *prim, f
     rs_swf row[RS_RAY_ROWS];
     if (rs_gather_is_run(ids, j))
         for (int c = 0; c < RS_RAY_ROWS; ++c)
-            row[c] = rs_gather_run(src[c] + ids[j]);
+            row[c] = sw_loadu(src[c] + ids[j]);
     else
         for (int c = 0; c < RS_RAY_ROWS; ++c)
             row[c] = sw_gather(src[c], ray);

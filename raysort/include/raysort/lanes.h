@@ -38,7 +38,7 @@ RS_INLINE int rs_lowest(int bits)
 /* RS_SW-lane vocabulary over rays gathered by id                           */
 /* ------------------------------------------------------------------------ */
 /* sw_gather loads one row of rs_rays for the RS_SW ids of a group, sw_loadu
- * RS_SW consecutive lanes of a row (from a multiple of 4); the other
+ * RS_SW consecutive floats from anywhere (unaligned); the other
  * operations are those of simd.h's 4-lane vocabulary, with the same operand
  * semantics (min/max return the second operand when either is NaN; != is true
  * for NaN). */
@@ -160,7 +160,7 @@ RS_INLINE void sw_storei(int32_t *p, rs_swi a) { memcpy(p, a.i, sizeof a.i); }
 #  if RS_SSE
 RS_INLINE rs_swf sw_gather(const float *base, rs_swi id)
 { return rs_set4(base[id.i[0]], base[id.i[1]], base[id.i[2]], base[id.i[3]]); }
-#    define sw_loadu rs_load     /* lanes [4k, 4k + 4) of a row: 16-byte aligned */
+RS_INLINE rs_swf sw_loadu(const float *p) { return _mm_loadu_ps(p); }
 #    define sw_set1 rs_set1
 #    define sw_add rs_add
 #    define sw_sub rs_sub
