@@ -12,6 +12,12 @@
  * single-ray kernels (wide8.h's, or simd.h's 4-wide ones), as bepu's
  * RayBatcher does.
  *
+ * A stream first copies its rays into records of 64 bytes (rs_stream_ray), and
+ * its ids are then indices of records: a group of RS_SW rays loads the eight
+ * floats a box test needs with RS_SW row loads and a transpose (sw_rows8)
+ * instead of eight gathers from eight rows of rs_rays; the hits go back to the
+ * rays when the stream is done.
+ *
  * Exactness: each lane performs rs_box1's slab arithmetic on one child box
  * and rs_tri1's Moller-Trumbore arithmetic on one triangle, in the same order
  * (simd.h; -ffp-contract=off), and a box test uses the ray's current t, which
@@ -54,7 +60,21 @@ enum rs_stream_order {
 /* Most children of a node: the 8-wide tree's. */
 #define RS_STREAM_MAX_WIDTH 8
 
-/* A stream waiting on the task stack: its ray ids are ids[first, first + n). */
+/* One ray of a stream: what its box tests read first (o, tmin, inv, t: one
+ * sw_rows8), then what its triangle tests read too (d, prim; u, v and the
+ * ray's index in rs_rays).  t, prim, u, v are the ray's closest hit so far. */
+typedef struct rs_stream_ray {
+    float o[3], tmin, inv[3], t;
+    float d[3];
+    int32_t prim;
+    float u, v;
+    int32_t ray;
+    int32_t unused;
+} rs_stream_ray;
+
+#define RS_STREAM_RAY_FLOATS 16     /* sizeof(rs_stream_ray) / 4: the sw_rows8 stride */
+
+/* A stream waiting on the task stack: its records are ids[first, first + n). */
 typedef struct rs_stream_task {
     int32_t ref;        /* >= 0: an inner node; < 0: a leaf, first triangle (4-wide tree)
                          * or triangle group (8-wide tree) -ref - 1 */
@@ -77,7 +97,9 @@ typedef struct rs_stream_entry {
  * the walk goes one level down; so ((width - 1) * depth + width) streams of
  * `size` ids, and as many tasks, bound the stacks. */
 typedef struct rs_stream_scratch {
-    int32_t *ids;           /* stack of id slices */
+    rs_stream_ray *rec;     /* the records of the stream's rays (64-byte aligned) */
+    void *rec_block;        /* the allocation rec lies in */
+    int32_t *ids;           /* stack of slices of record indices */
     int32_t *sub[RS_STREAM_MAX_WIDTH];  /* a node's per-child sub-streams while it is filtered */
     rs_stream_task *tasks;  /* task stack */
     rs_stream_entry *single;/* stack of the single-ray finish */
@@ -93,6 +115,7 @@ RS_INLINE int rs_stream_slots(int width, int depth) { return (width - 1) * depth
 
 RS_INLINE void rs_stream_free(rs_stream_scratch *w)
 {
+    free(w->rec_block);
     free(w->ids);
     for (int k = 0; k < RS_STREAM_MAX_WIDTH; ++k)
         free(w->sub[k]);
@@ -109,6 +132,9 @@ RS_INLINE int rs_stream_alloc(rs_stream_scratch *w, int size, int width, int dep
     w->size = size;
     w->width = width;
     w->depth = depth;
+    w->rec_block = malloc(((size_t)size + 1) * sizeof(rs_stream_ray));
+    w->rec = w->rec_block ? (rs_stream_ray *)(((uintptr_t)w->rec_block + 63) & ~(uintptr_t)63)
+                          : NULL;
     w->ids = (int32_t *)malloc(((size_t)slots * size + RS_SW) * sizeof(int32_t));
     for (int k = 0; k < RS_STREAM_MAX_WIDTH; ++k) {
         w->sub[k] = k < width ? (int32_t *)malloc(((size_t)size + RS_SW) * sizeof(int32_t)) : NULL;
@@ -117,7 +143,7 @@ RS_INLINE int rs_stream_alloc(rs_stream_scratch *w, int size, int width, int dep
     w->tasks = (rs_stream_task *)malloc((size_t)slots * sizeof(rs_stream_task));
     w->single = (rs_stream_entry *)malloc((size_t)slots * sizeof(rs_stream_entry));
     w->level_rays = (int64_t *)calloc((size_t)depth + 1, sizeof(int64_t));
-    if (!ok || !w->ids || !w->tasks || !w->single || !w->level_rays) {
+    if (!ok || !w->rec_block || !w->ids || !w->tasks || !w->single || !w->level_rays) {
         rs_stream_free(w);
         return 0;
     }
@@ -128,12 +154,13 @@ RS_INLINE int rs_stream_alloc(rs_stream_scratch *w, int size, int width, int dep
 /* A stream at an inner node: filter it into the children's sub-streams      */
 /* ------------------------------------------------------------------------ */
 
-/* Split ids[0, n) into sub[k] (cnt[k] ids each), k < width: the rays that hit
- * child k's box before their current t.  The boxes are structure-of-arrays,
- * lo[a * width + k] and hi[a * width + k] (rs_node4 or rs_node8).  votes[k]
+/* Split ids[0, n) into sub[k] (cnt[k] ids each), k < width: the rays (records
+ * of rec) that hit child k's box before their current t.  The boxes are
+ * structure-of-arrays, lo[a * width + k] and hi[a * width + k] (rs_node4 or rs_node8).  votes[k]
  * counts the rays for which child k is the nearest box hit; negative[a] the
  * rays travelling down axis a. */
-RS_INLINE void rs_stream_filter(const rs_rays *r, int width, const float *lo, const float *hi,
+RS_INLINE void rs_stream_filter(const rs_stream_ray *rec, int width, const float *lo,
+                                const float *hi,
                                 const int32_t *ids, int n, int32_t *const *sub, int *cnt,
                                 int *votes, int negative[3])
 {
@@ -147,15 +174,16 @@ RS_INLINE void rs_stream_filter(const rs_rays *r, int width, const float *lo, co
     for (int g = 0; g < n; g += RS_SW) {
         int valid;
         rs_swi id = rs_stream_group(ids, g, n, &valid);
-        rs_swf o[3], inv[3];
+        rs_swf f[8], o[3], inv[3];
         rs_swm neg[3];
+        sw_rows8(rec->o, RS_STREAM_RAY_FLOATS, id, f);      /* o, tmin, inv, t */
         for (int a = 0; a < 3; ++a) {
-            o[a] = sw_gather_loads(r->o[a], id);
-            inv[a] = sw_gather_loads(r->inv[a], id);
+            o[a] = f[a];
+            inv[a] = f[4 + a];
             neg[a] = sw_sign(inv[a]);
             down[a] += rs_popcount(sw_bits(neg[a]) & valid);
         }
-        rs_swf tmin = sw_gather_loads(r->tmin, id), t = sw_gather_loads(r->t, id), best = inf;
+        rs_swf tmin = f[3], t = f[7], best = inf;
         rs_swi nearest = sw_set1i(-1);      /* per lane: j of the nearest live child hit */
         for (int j = 0; j < m; ++j) {
             int k = live[j];
@@ -221,25 +249,28 @@ typedef struct rs_stream_lanes {
     int changed;        /* lanes whose hit changed */
 } rs_stream_lanes;
 
-RS_INLINE void rs_stream_lanes_load(const rs_rays *r, const int32_t *ids, int g, int n,
+RS_INLINE void rs_stream_lanes_load(const rs_stream_ray *rec, const int32_t *ids, int g, int n,
                                     rs_stream_lanes *s)
 {
     int valid;
+    rs_swf f[8], h[8];
     s->id = rs_stream_group(ids, g, n, &valid);
+    sw_rows8(rec->o, RS_STREAM_RAY_FLOATS, s->id, f);       /* o, tmin, inv, t */
+    sw_rows8(rec->d, RS_STREAM_RAY_FLOATS, s->id, h);       /* d, prim, u, v, ray */
     for (int a = 0; a < 3; ++a) {
-        s->o[a] = sw_gather_loads(r->o[a], s->id);
-        s->d[a] = sw_gather_loads(r->d[a], s->id);
+        s->o[a] = f[a];
+        s->d[a] = h[a];
     }
-    s->tmin = sw_gather_loads(r->tmin, s->id);
-    s->best = sw_gather_loads(r->t, s->id);
-    s->prim = sw_gatheri(r->prim, s->id);
+    s->tmin = f[3];
+    s->best = f[7];
+    s->prim = sw_asi(h[3]);
     s->u = s->v = sw_set1(0.0f);
     s->valid = sw_from_bits(valid);
     s->changed = 0;
 }
 
-/* Write the lanes whose hit changed back to the rays. */
-RS_INLINE void rs_stream_lanes_store(rs_rays *r, const rs_stream_lanes *s)
+/* Write the lanes whose hit changed back to their records. */
+RS_INLINE void rs_stream_lanes_store(rs_stream_ray *rec, const rs_stream_lanes *s)
 {
     int changed = s->changed;
     if (!changed)
@@ -253,11 +284,11 @@ RS_INLINE void rs_stream_lanes_store(rs_rays *r, const rs_stream_lanes *s)
     sw_storei(li, s->id);
     for (; changed; changed &= changed - 1) {
         int k = rs_lowest(changed);
-        int32_t i = li[k];
-        r->t[i] = lt[k];
-        r->prim[i] = lp[k];
-        r->u[i] = lu[k];
-        r->v[i] = lv[k];
+        rs_stream_ray *x = &rec[li[k]];
+        x->t = lt[k];
+        x->prim = lp[k];
+        x->u = lu[k];
+        x->v = lv[k];
     }
 }
 
@@ -299,27 +330,27 @@ RS_INLINE void rs_stream_tri(rs_stream_lanes *s, const float *v0, const float *e
 
 /* Test the rays ids[0, n) against triangles tris[0, count) (the 4-wide tree's
  * leaves), RS_SW rays at a time. */
-RS_INLINE void rs_stream_leaf4(rs_rays *r, const rs_tri *tris, int count, const int32_t *ids,
-                               int n, int any_hit)
+RS_INLINE void rs_stream_leaf4(rs_stream_ray *rec, const rs_tri *tris, int count,
+                               const int32_t *ids, int n, int any_hit)
 {
     rs_stream_lanes s;
     for (int g = 0; g < n; g += RS_SW) {
-        rs_stream_lanes_load(r, ids, g, n, &s);
+        rs_stream_lanes_load(rec, ids, g, n, &s);
         for (int k = 0; k < count; ++k)
             rs_stream_tri(&s, tris[k].v0, tris[k].e1, tris[k].e2, 1, tris[k].id, any_hit);
-        rs_stream_lanes_store(r, &s);
+        rs_stream_lanes_store(rec, &s);
     }
 }
 
 /* Test the rays ids[0, n) against the triangles of groups[0, count) (the 8-wide
  * tree's leaves), RS_SW rays per triangle; a group's unused lanes (id
  * INT32_MAX, zero edges: never hit) are skipped. */
-RS_INLINE void rs_stream_leaf8(rs_rays *r, const rs_tri8 *groups, int count, const int32_t *ids,
-                               int n, int any_hit)
+RS_INLINE void rs_stream_leaf8(rs_stream_ray *rec, const rs_tri8 *groups, int count,
+                               const int32_t *ids, int n, int any_hit)
 {
     rs_stream_lanes s;
     for (int g = 0; g < n; g += RS_SW) {
-        rs_stream_lanes_load(r, ids, g, n, &s);
+        rs_stream_lanes_load(rec, ids, g, n, &s);
         for (int j = 0; j < count; ++j) {
             const rs_tri8 *tr = &groups[j];
             for (int k = 0; k < 8; ++k)
@@ -327,7 +358,7 @@ RS_INLINE void rs_stream_leaf8(rs_rays *r, const rs_tri8 *groups, int count, con
                     rs_stream_tri(&s, &tr->v0[0][k], &tr->e1[0][k], &tr->e2[0][k], 8,
                                   tr->id[k], any_hit);
         }
-        rs_stream_lanes_store(r, &s);
+        rs_stream_lanes_store(rec, &s);
     }
 }
 
@@ -470,7 +501,47 @@ RS_INLINE void rs_stream_single8(const rs_node8 *nodes, const rs_tri8 *groups, r
 /* The traversal of one stream                                              */
 /* ------------------------------------------------------------------------ */
 
-/* Trace the n <= w->size rays whose ids are w->ids[0, n) from the root of a
+/* Copy rays ids[0, n) into the records rec[0, n) and make ids[j] = j. */
+RS_INLINE void rs_stream_records(const rs_rays *r, int32_t *ids, int n, rs_stream_ray *rec)
+{
+    for (int j = 0; j < n; ++j) {
+        int32_t i = ids[j];
+        rs_stream_ray *x = &rec[j];
+        for (int a = 0; a < 3; ++a) {
+            x->o[a] = r->o[a][i];
+            x->inv[a] = r->inv[a][i];
+            x->d[a] = r->d[a][i];
+        }
+        x->tmin = r->tmin[i];
+        x->t = r->t[i];
+        x->prim = r->prim[i];
+        x->u = r->u[i];
+        x->v = r->v[i];
+        x->ray = i;
+        x->unused = 0;
+        ids[j] = j;
+    }
+}
+
+/* Copy the closest hit of record x to its ray, or (to_ray = 0) back. */
+RS_INLINE void rs_stream_sync(rs_rays *r, rs_stream_ray *x, int to_ray)
+{
+    int32_t i = x->ray;
+    if (to_ray) {
+        r->t[i] = x->t;
+        r->prim[i] = x->prim;
+        r->u[i] = x->u;
+        r->v[i] = x->v;
+    } else {
+        x->t = r->t[i];
+        x->prim = r->prim[i];
+        x->u = r->u[i];
+        x->v = r->v[i];
+    }
+}
+
+/* Trace the n <= w->size rays whose ids are w->ids[0, n) (overwritten: by the
+ * indices of their records in w->rec) from the root of a
  * tree of w->width children per node: rs_node4 nodes and rs_tri leaves
  * (width 4) or rs_node8 nodes and rs_tri8 leaf groups (width 8).  Streams of
  * fewer than min_stream rays finish one ray at a time.
@@ -493,7 +564,9 @@ RS_INLINE void rs_stream_walk(const int width, const void *tree, const void *lea
     const rs_node8 *nodes8 = (const rs_node8 *)tree;
     const rs_tri *tris = (const rs_tri *)leaves;
     const rs_tri8 *groups = (const rs_tri8 *)leaves;
+    rs_stream_ray *rec = w->rec;
     int nt = 1;
+    rs_stream_records(r, w->ids, n, rec);
     w->tasks[0].ref = 0;
     w->tasks[0].tris = 0;
     w->tasks[0].first = 0;
@@ -504,15 +577,17 @@ RS_INLINE void rs_stream_walk(const int width, const void *tree, const void *lea
         int32_t *ids = w->ids + task.first;
         if (task.n < min_stream) {
             for (int j = 0; j < task.n; ++j) {
-                int i = ids[j];
-                if (!(r->tmin[i] < r->t[i]))
+                rs_stream_ray *x = &rec[ids[j]];
+                if (!(x->tmin < x->t))
                     continue;
+                rs_stream_sync(r, x, 1);
                 if (width == 8)
-                    rs_stream_single8(nodes8, groups, r, i, task.ref, task.tris, any_hit,
+                    rs_stream_single8(nodes8, groups, r, x->ray, task.ref, task.tris, any_hit,
                                       w->single, c);
                 else
-                    rs_stream_single4(nodes4, tris, r, i, task.ref, task.tris, any_hit,
+                    rs_stream_single4(nodes4, tris, r, x->ray, task.ref, task.tris, any_hit,
                                       w->single, c);
+                rs_stream_sync(r, x, 0);
             }
             continue;
         }
@@ -522,10 +597,10 @@ RS_INLINE void rs_stream_walk(const int width, const void *tree, const void *lea
         if (task.ref < 0) {
             if (width == 8) {
                 c->tri4 += (int64_t)task.tris * task.n;
-                rs_stream_leaf8(r, &groups[-task.ref - 1], task.tris, ids, task.n, any_hit);
+                rs_stream_leaf8(rec, &groups[-task.ref - 1], task.tris, ids, task.n, any_hit);
             } else {
                 c->tri4 += (int64_t)task.tris * ((task.n + 3) / 4);
-                rs_stream_leaf4(r, &tris[-task.ref - 1], task.tris, ids, task.n, any_hit);
+                rs_stream_leaf4(rec, &tris[-task.ref - 1], task.tris, ids, task.n, any_hit);
             }
             continue;
         }
@@ -534,7 +609,7 @@ RS_INLINE void rs_stream_walk(const int width, const void *tree, const void *lea
         const int32_t *child = width == 8 ? nodes8[task.ref].child : nodes4[task.ref].child;
         const uint16_t *count = width == 8 ? nodes8[task.ref].count : nodes4[task.ref].count;
         c->box4 += task.n;
-        rs_stream_filter(r, width, lo, hi, ids, task.n, w->sub, cnt, votes, negative);
+        rs_stream_filter(rec, width, lo, hi, ids, task.n, w->sub, cnt, votes, negative);
         int m = rs_stream_order(width, lo, hi, cnt, votes, negative, task.n, order, visit);
         /* the parent's ids are read: its slice takes the sub-streams, the one
          * to visit first last, so it is popped first */
@@ -560,6 +635,8 @@ RS_INLINE void rs_stream_walk(const int width, const void *tree, const void *lea
                                    : (const void *)&tris[-ref - 1], 2);
         }
     }
+    for (int j = 0; j < n; ++j)
+        rs_stream_sync(r, &rec[j], 1);
 }
 
 /* rs_stream_walk over the 4-wide tree (BVH.wide, BVH.triangles). */
