@@ -53,8 +53,6 @@ typedef __m512i rs_swi;
 RS_INLINE rs_swi sw_ids(const int32_t *p) { return _mm512_loadu_si512((const void *)p); }
 RS_INLINE rs_swf sw_gather(const float *base, rs_swi id) { return _mm512_i32gather_ps(id, base, 4); }
 RS_INLINE rs_swf sw_loadu(const float *p) { return _mm512_loadu_ps(p); }
-RS_INLINE rs_swi sw_gatheri(const int32_t *base, rs_swi id)
-{ return _mm512_i32gather_epi32(id, base, 4); }
 RS_INLINE rs_swf sw_set1(float a) { return _mm512_set1_ps(a); }
 RS_INLINE rs_swi sw_set1i(int32_t a) { return _mm512_set1_epi32(a); }
 RS_INLINE int sw_eqi_bits(rs_swi a, rs_swi b) { return (int)_mm512_cmpeq_epi32_mask(a, b); }
@@ -100,19 +98,7 @@ typedef __m256 rs_swm;
 typedef __m256i rs_swi;
 RS_INLINE rs_swi sw_ids(const int32_t *p) { return _mm256_loadu_si256((const __m256i *)p); }
 RS_INLINE rs_swf sw_gather(const float *base, rs_swi id) { return _mm256_i32gather_ps(base, id, 4); }
-/* The same lanes as sw_gather by eight scalar loads: on Zen 3 the stream traversal,
- * which gathers seven rows per group of rays at every node, ran 8-15 % faster so
- * (BENCHMARKS.md §13); AVX-512's gathers are kept. */
-RS_INLINE rs_swf sw_gather_loads(const float *base, rs_swi id)
-{
-    int32_t i[8];
-    _mm256_storeu_si256((__m256i *)i, id);
-    return _mm256_setr_ps(base[i[0]], base[i[1]], base[i[2]], base[i[3]], base[i[4]], base[i[5]],
-                          base[i[6]], base[i[7]]);
-}
 RS_INLINE rs_swf sw_loadu(const float *p) { return _mm256_loadu_ps(p); }
-RS_INLINE rs_swi sw_gatheri(const int32_t *base, rs_swi id)
-{ return _mm256_i32gather_epi32((const int *)base, id, 4); }
 RS_INLINE rs_swf sw_set1(float a) { return _mm256_set1_ps(a); }
 RS_INLINE rs_swi sw_set1i(int32_t a) { return _mm256_set1_epi32(a); }
 RS_INLINE int sw_eqi_bits(rs_swi a, rs_swi b)
@@ -244,8 +230,6 @@ typedef int rs_swm;
 #  endif
 typedef struct { int32_t i[RS_SW]; } rs_swi;
 RS_INLINE rs_swi sw_ids(const int32_t *p) { rs_swi r; memcpy(r.i, p, sizeof r.i); return r; }
-RS_INLINE rs_swi sw_gatheri(const int32_t *base, rs_swi id)
-{ rs_swi r; for (int k = 0; k < RS_SW; ++k) r.i[k] = base[id.i[k]]; return r; }
 RS_INLINE rs_swi sw_set1i(int32_t a) { rs_swi r; for (int k = 0; k < RS_SW; ++k) r.i[k] = a; return r; }
 RS_INLINE int sw_eqi_bits(rs_swi a, rs_swi b)
 { int bits = 0; for (int k = 0; k < RS_SW; ++k) bits |= (a.i[k] == b.i[k]) << k; return bits; }
@@ -330,10 +314,6 @@ RS_INLINE void sw_store(float *p, rs_swf a) { *p = a; }
 RS_INLINE rs_swm sw_lti(rs_swi a, rs_swi b) { return a.i[0] < b.i[0]; }
 RS_INLINE rs_swi sw_blendi(rs_swm m, rs_swi a, rs_swi b) { return m ? a : b; }
 #  endif
-#endif
-
-#if !RS_ISA_AVX2 || RS_ISA_AVX512
-#  define sw_gather_loads sw_gather
 #endif
 
 #if !RS_ISA_AVX512 && !RS_ISA_AVX2
