@@ -1,5 +1,5 @@
 """``lambert``: a Lambertian path tracer (cosine-weighted diffuse bounces)."""
-from libc.math cimport sqrtf, M_PI, INFINITY
+from libc.math cimport sqrt, sqrtf, M_PI, INFINITY
 from libc.stdint cimport int32_t, uint32_t
 from raysort._rng cimport seed_key, sample_key, uniform_at
 from raysort._types cimport RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH, rs_prefetch
@@ -25,6 +25,57 @@ cdef enum:
     FACE_EMISSION = 8
     FACE_EMITS = 11         # 1 if any channel of the emission is not zero, else 0
     FACE_FLOATS = 16
+
+
+def _face_records(const float[:, ::1] vertices, const int32_t[:, ::1] faces,
+                  const float[:, ::1] albedo, const float[:, ::1] emission, float[:, ::1] out):
+    """Fill ``out`` (m, FACE_FLOATS) with the face records in one pass: the normal of
+    :meth:`raysort.scene.Scene.face_normals` bit for bit (the same double operations:
+    NumPy's cross product, the norm summed x, y, z, a zero normal for a zero length),
+    albedo, emission and whether it emits.  IndexError at a vertex index out of range."""
+    cdef Py_ssize_t m = faces.shape[0], nv = vertices.shape[0], f, bad = -1
+    cdef int a
+    cdef int32_t i0, i1, i2
+    cdef double e0[3]
+    cdef double e1[3]
+    cdef double c[3]
+    cdef double length
+    cdef float *rec
+    if (faces.shape[1] != 3 or vertices.shape[1] != 3 or albedo.shape[0] != m
+            or albedo.shape[1] != 3 or emission.shape[0] != m or emission.shape[1] != 3
+            or out.shape[0] != m or out.shape[1] != FACE_FLOATS):
+        raise ValueError("_face_records: vertices (n, 3), faces, albedo, emission (m, 3) and "
+                         "out (m, FACE_FLOATS) expected")
+    with nogil:
+        for f in range(m):
+            i0 = faces[f, 0]
+            i1 = faces[f, 1]
+            i2 = faces[f, 2]
+            if not (0 <= i0 < nv and 0 <= i1 < nv and 0 <= i2 < nv):
+                bad = f
+                break
+            for a in range(3):
+                e0[a] = <double>vertices[i1, a] - <double>vertices[i0, a]
+                e1[a] = <double>vertices[i2, a] - <double>vertices[i0, a]
+            c[0] = e0[1] * e1[2] - e0[2] * e1[1]
+            c[1] = e0[2] * e1[0] - e0[0] * e1[2]
+            c[2] = e0[0] * e1[1] - e0[1] * e1[0]
+            length = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
+            rec = &out[f, 0]
+            for a in range(FACE_FLOATS):
+                rec[a] = 0.0
+            for a in range(3):
+                rec[FACE_NORMAL + a] = <float>(c[a] / length) if length > 0 else <float>0.0
+                rec[FACE_ALBEDO + a] = albedo[f, a]
+                rec[FACE_EMISSION + a] = emission[f, a]
+            rec[FACE_EMITS] = (emission[f, 0] != 0) | (emission[f, 1] != 0) | (emission[f, 2] != 0)
+    if bad >= 0:
+        raise IndexError(f"_face_records: face {bad} names a vertex beyond the {nv} vertices")
+
+
+#: the face record's layout, for Python (tests)
+FACE_LAYOUT = dict(normal=FACE_NORMAL, albedo=FACE_ALBEDO, emission=FACE_EMISSION,
+                   emits=FACE_EMITS, floats=FACE_FLOATS)
 
 
 cdef struct ShadeParams:
@@ -210,11 +261,9 @@ class LambertShader(Shader):
         """Cache the scene's face records and lights (``render`` calls this first)."""
         lights = scene.lights if self.shadow_rays in (None, True) else []
         faces = aligned_empty((len(scene.faces), FACE_FLOATS), np.float32, FACE_FLOATS * 4)
-        faces[:] = 0.0
-        faces[:, FACE_NORMAL:FACE_NORMAL + 3] = scene.face_normals()
-        faces[:, FACE_ALBEDO:FACE_ALBEDO + 3] = scene.albedo
-        faces[:, FACE_EMISSION:FACE_EMISSION + 3] = scene.emission
-        faces[:, FACE_EMITS] = (scene.emission != 0).any(axis=1)
+        _face_records(*(np.ascontiguousarray(a, dtype=dt) for a, dt in (
+            (scene.vertices, np.float32), (scene.faces, np.int32), (scene.albedo, np.float32),
+            (scene.emission, np.float32))), faces)
         self._prepared = (
             scene,
             faces,

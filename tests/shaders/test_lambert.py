@@ -13,6 +13,7 @@ import pytest
 import raysort
 from raysort.rays import MAX_PACKET
 from raysort.reference import brute_force
+from raysort.shaders import lambert
 from raysort.workloads import workload
 
 SIZE = dict(width=64, height=64, spp=8, seed=11, tile=32)
@@ -73,3 +74,49 @@ def test_bounce_directions_are_cosine_distributed(bounce):
     assert stat < bound
     wrong, _ = chi_square(cos, phi)       # what a uniform-hemisphere sampler would pass
     assert wrong > 10 * bound
+
+
+def numpy_face_records(scene):
+    """The face records as NumPy statements: normal, albedo, emission, emits (lambert.pyx)."""
+    at = lambert.FACE_LAYOUT
+    records = np.zeros((len(scene.faces), at["floats"]), np.float32)
+    records[:, at["normal"]:at["normal"] + 3] = scene.face_normals()
+    records[:, at["albedo"]:at["albedo"] + 3] = scene.albedo
+    records[:, at["emission"]:at["emission"] + 3] = scene.emission
+    records[:, at["emits"]] = (scene.emission != 0).any(axis=1)
+    return records
+
+
+def degenerate_mesh_scene():
+    """Random triangles with zero-area faces (repeated and collinear vertices) and emitters."""
+    rng = np.random.default_rng(5)
+    vertices = rng.normal(0, 1e3, (300, 3)).astype(np.float32)
+    vertices[10:20] = vertices[0]                       # repeated vertices
+    vertices[20:30] = vertices[1] + np.float32(2) * (vertices[1] - vertices[0])
+    faces = rng.integers(0, 300, (2000, 3)).astype(np.int32)
+    faces[:50, 1] = faces[:50, 0]                       # zero area
+    emission = np.where(rng.random((2000, 1)) < 0.1, rng.random((2000, 3)), 0.0)
+    emission[::7, :2] = 0.0                             # one channel only
+    return raysort.Scene.from_mesh(vertices, faces, albedo=rng.random((2000, 3)),
+                                   emission=emission)
+
+
+@pytest.mark.parametrize("name", ["sibenik", "cornell", "forest", "furnace", "degenerate"])
+def test_face_records_match_the_scene_bit_for_bit(name):
+    """The one-pass face records equal ``Scene.face_normals`` and the scene's materials."""
+    scene = degenerate_mesh_scene() if name == "degenerate" else raysort.load_scene(name)
+    shader = lambert.LambertShader()
+    shader.prepare(scene)
+    got = shader._prepared[1]
+    want = numpy_face_records(scene)
+    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+    assert got.ctypes.data % 64 == 0
+
+
+def test_face_records_reject_a_vertex_index_out_of_range():
+    scene = degenerate_mesh_scene()
+    faces = scene.faces.copy()
+    faces[7, 2] = len(scene.vertices)
+    out = np.empty((len(faces), lambert.FACE_LAYOUT["floats"]), np.float32)
+    with pytest.raises(IndexError, match="face 7"):
+        lambert._face_records(scene.vertices, faces, scene.albedo, scene.emission, out)
