@@ -5,7 +5,9 @@ traversal of :func:`raysort.pipeline.default_traversal`, ``lambert``) and report
 the render's own per-stage thread-CPU timers (``RenderStats.stage_seconds``), each
 stage's median over ``--stage-rounds`` frames (after a small warm-up frame, which builds
 the trees the traversal reads), its share of the frame's CPU and the framework's share
-(every stage but ``traverse``: shade, check, gather, sort, generate, scatter).  Then it
+(every stage but ``traverse``: shade, check, gather, sort, generate, scatter), also
+with the shader's ``prepare`` counted (CPU of every frame, but outside the stage
+timers; timed on its own, the median of three calls).  Then it
 times whole frames with 1 and 2 threads, interleaved in one process (a warm-up round,
 the order rotated every round) and prints medians with their spread and the per-round
 speed-up.  Images are compared bit for bit.
@@ -44,8 +46,20 @@ def render(pipe, args):
     return result, time.perf_counter() - start
 
 
-def stage_table(runs):
-    """Each stage's median CPU seconds over the renders ``runs`` (their RenderStats)."""
+def prepare_seconds(pipe, rounds=3):
+    """The median thread-CPU seconds of the shader's ``prepare`` (which ``render`` calls
+    once per frame, outside the stage timers)."""
+    seconds = []
+    for _ in range(rounds):
+        start = time.thread_time()
+        pipe.shader.prepare(pipe.scene)
+        seconds.append(time.thread_time() - start)
+    return statistics.median(seconds)
+
+
+def stage_table(runs, prepare):
+    """Each stage's median CPU seconds over the renders ``runs`` (their RenderStats), and
+    the framework's share with the shader's ``prepare`` (``prepare`` seconds) counted."""
     seconds = {stage: statistics.median(r.stage_seconds[stage] for r in runs)
                for stage in runs[0].stage_seconds}
     total = sum(seconds.values())
@@ -55,6 +69,8 @@ def stage_table(runs):
     framework = total - seconds.get("traverse", 0.0)
     print(f"  framework (all but traverse): {framework:.3f} s = {framework / total:.1%} of "
           f"{total:.3f} CPU s")
+    print(f"  with the shader's prepare ({prepare:.4f} s, outside the stage timers): "
+          f"{framework + prepare:.3f} s = {(framework + prepare) / (total + prepare):.1%}")
 
 
 def main(argv=None):
@@ -85,7 +101,7 @@ def main(argv=None):
     result = runs[0][0]
     print(f"\none thread: {statistics.median(s for _, s in runs):.2f} s wall (median), "
           f"{result.stats.total_rays:,} rays")
-    stage_table([res.stats for res, _ in runs])
+    stage_table([res.stats for res, _ in runs], prepare_seconds(pipes[1]))
     if args.no_threads:
         return
 
