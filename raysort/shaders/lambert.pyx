@@ -17,23 +17,28 @@ from raysort.rays import RayBatch, aligned_empty
 cdef enum:
     PREFETCH_AHEAD = 16     # rays between a face-data prefetch and its use
 
-# A face's shading data in one cache line (a hit is one random access): its geometric
-# normal, albedo and emission, each padded to four floats, and whether it emits.
+# A face's shading data in half a cache line (a hit is one random access, and the
+# records of a scene take half the cache they would in a line each): its geometric
+# normal, albedo, and which row of the emitters' table holds its emission (int32 bits,
+# -1 for a face that does not emit: most faces).
 cdef enum:
     FACE_NORMAL = 0
+    FACE_EMITTER = 3
     FACE_ALBEDO = 4
-    FACE_EMISSION = 8
-    FACE_EMITS = 11         # 1 if any channel of the emission is not zero, else 0
-    FACE_FLOATS = 16
+    FACE_FLOATS = 8
 
 
 def _face_records(const float[:, ::1] vertices, const int32_t[:, ::1] faces,
-                  const float[:, ::1] albedo, const float[:, ::1] emission, float[:, ::1] out):
+                  const float[:, ::1] albedo, const float[:, ::1] emission, float[:, ::1] out,
+                  float[:, ::1] emitters):
     """Fill ``out`` (m, FACE_FLOATS) with the face records in one pass: the normal of
     :meth:`raysort.scene.Scene.face_normals` bit for bit (the same double operations:
     NumPy's cross product, the norm summed x, y, z, a zero normal for a zero length),
-    albedo, emission and whether it emits.  IndexError at a vertex index out of range."""
-    cdef Py_ssize_t m = faces.shape[0], nv = vertices.shape[0], f, bad = -1
+    the albedo, and the row of ``emitters`` (one per face with an emission other than
+    zero, in face order; (k, 4)) that gets its emission.  IndexError at a vertex index
+    out of range; ValueError if ``emitters`` has not one row per emitting face."""
+    cdef Py_ssize_t m = faces.shape[0], nv = vertices.shape[0], f, bad = -1, e = 0
+    cdef Py_ssize_t k = emitters.shape[0]
     cdef int a
     cdef int32_t i0, i1, i2
     cdef double e0[3]
@@ -43,9 +48,9 @@ def _face_records(const float[:, ::1] vertices, const int32_t[:, ::1] faces,
     cdef float *rec
     if (faces.shape[1] != 3 or vertices.shape[1] != 3 or albedo.shape[0] != m
             or albedo.shape[1] != 3 or emission.shape[0] != m or emission.shape[1] != 3
-            or out.shape[0] != m or out.shape[1] != FACE_FLOATS):
-        raise ValueError("_face_records: vertices (n, 3), faces, albedo, emission (m, 3) and "
-                         "out (m, FACE_FLOATS) expected")
+            or out.shape[0] != m or out.shape[1] != FACE_FLOATS or emitters.shape[1] != 4):
+        raise ValueError("_face_records: vertices (n, 3), faces, albedo, emission (m, 3), "
+                         "out (m, FACE_FLOATS) and emitters (k, 4) expected")
     with nogil:
         for f in range(m):
             i0 = faces[f, 0]
@@ -67,15 +72,24 @@ def _face_records(const float[:, ::1] vertices, const int32_t[:, ::1] faces,
             for a in range(3):
                 rec[FACE_NORMAL + a] = <float>(c[a] / length) if length > 0 else <float>0.0
                 rec[FACE_ALBEDO + a] = albedo[f, a]
-                rec[FACE_EMISSION + a] = emission[f, a]
-            rec[FACE_EMITS] = (emission[f, 0] != 0) | (emission[f, 1] != 0) | (emission[f, 2] != 0)
+            (<int32_t *> rec)[FACE_EMITTER] = -1
+            if (emission[f, 0] != 0) | (emission[f, 1] != 0) | (emission[f, 2] != 0):
+                if e == k:
+                    bad = -2
+                    break
+                (<int32_t *> rec)[FACE_EMITTER] = <int32_t> e
+                for a in range(4):
+                    emitters[e, a] = emission[f, a] if a < 3 else <float>0.0
+                e += 1
+    if bad == -2 or (bad == -1 and e != k):
+        raise ValueError(f"_face_records: emitters has {k} rows, not one per emitting face")
     if bad >= 0:
         raise IndexError(f"_face_records: face {bad} names a vertex beyond the {nv} vertices")
 
 
 #: the face record's layout, for Python (tests)
-FACE_LAYOUT = dict(normal=FACE_NORMAL, albedo=FACE_ALBEDO, emission=FACE_EMISSION,
-                   emits=FACE_EMITS, floats=FACE_FLOATS)
+FACE_LAYOUT = dict(normal=FACE_NORMAL, emitter=FACE_EMITTER, albedo=FACE_ALBEDO,
+                   floats=FACE_FLOATS)
 
 
 cdef struct ShadeParams:
@@ -87,7 +101,8 @@ cdef struct ShadeParams:
 
 
 cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
-                      const float[:, ::1] faces, const float[::1] sky,
+                      const float[:, ::1] faces, const float[:, ::1] emitters,
+                      const float[::1] sky,
                       const int32_t[::1] pixel, const int32_t[::1] sample,
                       const int32_t[::1] slot, const float[:, ::1] thr, ShadeParams prm,
                       const float[:, ::1] light_pos, const float[:, ::1] light_int,
@@ -95,7 +110,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                       float[:, ::1] next_rays, int32_t[::1] next_parent, float[:, ::1] next_thr,
                       float[:, ::1] sh_rays, int32_t[::1] sh_parent, int32_t[::1] sh_slot,
                       float[:, ::1] sh_contrib, int *n_next, int *n_shadow) noexcept nogil:
-    cdef int n = prim.shape[0], blk, i0, i, f, c, h, j, L, count, k = 0, m = 0
+    cdef int n = prim.shape[0], blk, i0, i, f, c, h, j, L, count, k = 0, m = 0, e
     cdef uint32_t dim = RS_DIM_BOUNCE + RS_DIMS_PER_BOUNCE * prm.depth   # types.h's budget
     cdef uint32_t seed_k = seed_key(prm.seed)
     cdef bint bounce = prm.depth < prm.max_depth
@@ -122,9 +137,10 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                 for c in range(3):
                     radiance[slot[i], c] += thr[c, i] * sky[c]
                 continue
-            if faces[f, FACE_EMITS] != 0:
+            e = (<const int32_t *> &faces[f, 0])[FACE_EMITTER]
+            if e >= 0:
                 for c in range(3):
-                    radiance[slot[i], c] += thr[c, i] * faces[f, FACE_EMISSION + c]
+                    radiance[slot[i], c] += thr[c, i] * emitters[e, c]
             h = b.n
             for c in range(3):
                 reflect[c][h] = thr[c, i] * faces[f, FACE_ALBEDO + c]
@@ -207,7 +223,8 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
 
 
 def _shade(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
-           const float[:, ::1] faces, const float[::1] sky, const int32_t[::1] pixel,
+           const float[:, ::1] faces, const float[:, ::1] emitters, const float[::1] sky,
+           const int32_t[::1] pixel,
            const int32_t[::1] sample, const int32_t[::1] slot, const float[:, ::1] thr,
            int depth, int max_depth,
            uint32_t seed, bint russian_roulette, int rr_depth,
@@ -219,7 +236,7 @@ def _shade(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim
     cdef ShadeParams prm = ShadeParams(depth, max_depth, seed, russian_roulette, rr_depth)
     cdef int k = 0, m = 0
     with nogil:
-        shade_batch(rays, t, prim, faces, sky, pixel, sample, slot, thr,
+        shade_batch(rays, t, prim, faces, emitters, sky, pixel, sample, slot, thr,
                     prm, light_pos, light_int, radiance, next_rays, next_parent, next_thr,
                     sh_rays, sh_parent, sh_slot, sh_contrib, &k, &m)
     return k, m
@@ -260,13 +277,17 @@ class LambertShader(Shader):
     def prepare(self, scene):
         """Cache the scene's face records and lights (``render`` calls this first)."""
         lights = scene.lights if self.shadow_rays in (None, True) else []
+        emission = np.ascontiguousarray(scene.emission, dtype=np.float32)
         faces = aligned_empty((len(scene.faces), FACE_FLOATS), np.float32, FACE_FLOATS * 4)
-        _face_records(*(np.ascontiguousarray(a, dtype=dt) for a, dt in (
-            (scene.vertices, np.float32), (scene.faces, np.int32), (scene.albedo, np.float32),
-            (scene.emission, np.float32))), faces)
+        emitters = np.empty((np.count_nonzero(emission.any(axis=1)), 4), np.float32)
+        _face_records(np.ascontiguousarray(scene.vertices, dtype=np.float32),
+                      np.ascontiguousarray(scene.faces, dtype=np.int32),
+                      np.ascontiguousarray(scene.albedo, dtype=np.float32), emission, faces,
+                      emitters)
         self._prepared = (
             scene,
             faces,
+            emitters,
             np.ascontiguousarray([lt.position for lt in lights], dtype=np.float32).reshape(-1, 3),
             np.ascontiguousarray([lt.intensity for lt in lights], dtype=np.float32).reshape(-1, 3),
         )
@@ -274,7 +295,7 @@ class LambertShader(Shader):
     def shade(self, scene, rays, hits, paths, depth, seed, radiance):
         if self._prepared is None or self._prepared[0] is not scene:
             self.prepare(scene)
-        _, faces, light_pos, light_int = self._prepared
+        _, faces, emitters, light_pos, light_int = self._prepared
         n = len(rays)
         k_max = n if depth < self.max_depth else 0     # the last depth makes no bounce
         next_rays = RayBatch._unfilled(k_max)    # _shade writes every row of its rays
@@ -285,7 +306,7 @@ class LambertShader(Shader):
         sh_parent = np.empty(m_max, dtype=np.int32)
         sh_slot = np.empty(m_max, dtype=np.int32)
         sh_contrib = np.empty((3, m_max), dtype=np.float32)
-        k, m = _shade(rays.data, hits.t, hits.prim, faces, scene.sky, paths.pixel,
+        k, m = _shade(rays.data, hits.t, hits.prim, faces, emitters, scene.sky, paths.pixel,
                       paths.sample, paths.slot, paths.throughput, depth, self.max_depth,
                       seed & 0xFFFFFFFF, self.russian_roulette, self.rr_depth, light_pos, light_int,
                       radiance, next_rays.data, next_parent, next_thr, sh_rays.data,

@@ -77,14 +77,18 @@ def test_bounce_directions_are_cosine_distributed(bounce):
 
 
 def numpy_face_records(scene):
-    """The face records as NumPy statements: normal, albedo, emission, emits (lambert.pyx)."""
+    """The face records and the emitters' table as NumPy statements (lambert.pyx): normal,
+    the emitter row (int32 bits, -1 for none) and albedo; the emitting faces' emission."""
     at = lambert.FACE_LAYOUT
     records = np.zeros((len(scene.faces), at["floats"]), np.float32)
     records[:, at["normal"]:at["normal"] + 3] = scene.face_normals()
     records[:, at["albedo"]:at["albedo"] + 3] = scene.albedo
-    records[:, at["emission"]:at["emission"] + 3] = scene.emission
-    records[:, at["emits"]] = (scene.emission != 0).any(axis=1)
-    return records
+    emits = (scene.emission != 0).any(axis=1)
+    row = np.where(emits, np.cumsum(emits) - 1, -1).astype(np.int32)
+    records.view(np.int32)[:, at["emitter"]] = row
+    emitters = np.zeros((emits.sum(), 4), np.float32)
+    emitters[:, :3] = scene.emission[emits]
+    return records, emitters
 
 
 def degenerate_mesh_scene():
@@ -107,10 +111,12 @@ def test_face_records_match_the_scene_bit_for_bit(name):
     scene = degenerate_mesh_scene() if name == "degenerate" else raysort.load_scene(name)
     shader = lambert.LambertShader()
     shader.prepare(scene)
-    got = shader._prepared[1]
-    want = numpy_face_records(scene)
-    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
-    assert got.ctypes.data % 64 == 0
+    _, records, emitters, *_ = shader._prepared
+    want_records, want_emitters = numpy_face_records(scene)
+    assert np.array_equal(records.view(np.uint32), want_records.view(np.uint32))
+    assert np.array_equal(emitters.view(np.uint32), want_emitters.view(np.uint32))
+    assert records.ctypes.data % (4 * lambert.FACE_LAYOUT["floats"]) == 0
+    assert len(emitters) > 0 or name in ("sibenik", "forest")
 
 
 def test_face_records_reject_a_vertex_index_out_of_range():
@@ -118,5 +124,10 @@ def test_face_records_reject_a_vertex_index_out_of_range():
     faces = scene.faces.copy()
     faces[7, 2] = len(scene.vertices)
     out = np.empty((len(faces), lambert.FACE_LAYOUT["floats"]), np.float32)
+    emitters = np.empty((np.count_nonzero(scene.emission.any(axis=1)), 4), np.float32)
     with pytest.raises(IndexError, match="face 7"):
-        lambert._face_records(scene.vertices, faces, scene.albedo, scene.emission, out)
+        lambert._face_records(scene.vertices, faces, scene.albedo, scene.emission, out,
+                              emitters)
+    with pytest.raises(ValueError, match="one per emitting face"):
+        lambert._face_records(scene.vertices, scene.faces, scene.albedo, scene.emission, out,
+                              emitters[1:])
