@@ -200,7 +200,7 @@ class StreamTraversal(Traversal):
                                      first) or ``direction`` (nearest box
                                      corner along the stream's majority
                                      octant first)
-    min_stream   int     4           streams of fewer rays finish one ray
+    min_stream   int     8           streams of fewer rays finish one ray
                                      at a time from their node (0: never)
     tree         int     8           8: the 8-wide BVH (``BVH.wide8``,
                                      leaves of rs_tri8 groups); 4: the
@@ -217,7 +217,7 @@ class StreamTraversal(Traversal):
 
     trusted = True
 
-    def __init__(self, *, stream_size=16384, order="votes", min_stream=4, tree=8, frustum=True):
+    def __init__(self, *, stream_size=16384, order="votes", min_stream=8, tree=8, frustum=True):
         self.stream_size = integer("stream_size", stream_size, 1, MAX_STREAM)
         if order not in ORDERS:
             raise ConfigError(f"order must be one of {', '.join(ORDERS)}; got {order!r}")
