@@ -8,7 +8,10 @@ hits that child, with SIMD tests over rays (16, 8 or 4 lanes on AVX-512, AVX2
 and SSE2; one on the scalar build); the sub-streams wait on a task stack, and
 leaves test their stream against each of their triangles, again SIMD over
 rays.  Small streams finish one ray at a time with the single-ray kernels of
-the same tree (``wide8``'s or ``wide``'s).  A node's box data is loaded once
+the same tree (``wide8``'s or ``wide``'s).  A stream first copies its rays
+into 64-byte records (origin, tmin, 1 / d, t; direction and hit), which its
+SIMD tests load with one row load per ray and a transpose; the hits go back
+to the rays when the stream is done.  A node's box data is loaded once
 for the whole stream, and the lanes are always full whatever the rays'
 directions, which is what the paper gains on incoherent rays.  The kernel is
 ``raysort/include/raysort/stream.h``.

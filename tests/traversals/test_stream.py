@@ -309,3 +309,20 @@ def test_pipeline_image_equals_wide(sibenik):
     counters = images["stream"].stats.counters[1]
     assert counters.stream_tasks > 0
     assert sum(counters.stream_level_rays) == counters.stream_rays > 0
+
+
+def test_the_avx2_append_table_lists_each_masks_lanes_in_order():
+    """lanes.h's rs_compress8 (the AVX2 filter's append): entry m holds the set bits of m,
+    lowest first, one per 4-bit digit; read from the header, held to that definition."""
+    import re
+    from pathlib import Path
+    header = Path(raysort.__file__).parent / "include" / "raysort" / "lanes.h"
+    text = header.read_text()
+    body = text[text.index("rs_compress8[256] = {"):]
+    body = body[:body.index("};")]
+    table = [int(v, 16) for v in re.findall(r"0x[0-9a-fA-F]+", body)]
+    assert len(table) == 256
+    for mask, entry in enumerate(table):
+        lanes = [k for k in range(8) if mask >> k & 1]
+        assert [entry >> (4 * j) & 0xF for j in range(len(lanes))] == lanes, mask
+        assert entry >> (4 * len(lanes)) == 0, mask
