@@ -14,9 +14,9 @@
  *
  * A stream first copies its rays into records of 64 bytes (rs_stream_ray), and
  * its ids are then indices of records: a group of RS_SW rays loads the eight
- * floats a box test needs with RS_SW row loads and a transpose (sw_rows8)
- * instead of eight gathers from eight rows of rs_rays; the hits go back to the
- * rays when the stream is done.
+ * floats a box test needs with RS_SW row loads and a transpose (sw_rows8;
+ * gathers of records with AVX-512) instead of eight gathers from eight rows of
+ * rs_rays; the hits go back to the rays when the stream is done.
  *
  * Exactness: each lane performs rs_box1's slab arithmetic on one child box
  * and rs_tri1's Moller-Trumbore arithmetic on one triangle, in the same order
@@ -156,13 +156,12 @@ RS_INLINE int rs_stream_alloc(rs_stream_scratch *w, int size, int width, int dep
 
 /* Split ids[0, n) into sub[k] (cnt[k] ids each), k < width: the rays (records
  * of rec) that hit child k's box before their current t.  The boxes are
- * structure-of-arrays, lo[a * width + k] and hi[a * width + k] (rs_node4 or rs_node8).  votes[k]
- * counts the rays for which child k is the nearest box hit; negative[a] the
- * rays travelling down axis a. */
+ * structure-of-arrays, lo[a * width + k] and hi[a * width + k] (rs_node4 or
+ * rs_node8).  votes[k] counts the rays for which child k is the nearest box
+ * hit; negative[a] the rays travelling down axis a. */
 RS_INLINE void rs_stream_filter(const rs_stream_ray *rec, int width, const float *lo,
-                                const float *hi,
-                                const int32_t *ids, int n, int32_t *const *sub, int *cnt,
-                                int *votes, int negative[3])
+                                const float *hi, const int32_t *ids, int n,
+                                int32_t *const *sub, int *cnt, int *votes, int negative[3])
 {
     int live[RS_STREAM_MAX_WIDTH], m = 0, down[3] = {0, 0, 0};
     for (int k = 0; k < width; ++k) {
@@ -540,9 +539,9 @@ RS_INLINE void rs_stream_sync(rs_rays *r, rs_stream_ray *x, int to_ray)
     }
 }
 
-/* Trace the n <= w->size rays whose ids are w->ids[0, n) (overwritten: by the
- * indices of their records in w->rec) from the root of a
- * tree of w->width children per node: rs_node4 nodes and rs_tri leaves
+/* Trace the n <= w->size rays whose ids are w->ids[0, n) (the walk overwrites
+ * them with the indices of their records in w->rec) from the root of a tree of
+ * w->width children per node: rs_node4 nodes and rs_tri leaves
  * (width 4) or rs_node8 nodes and rs_tri8 leaf groups (width 8).  Streams of
  * fewer than min_stream rays finish one ray at a time.
  *
