@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from raysort import procedural
+from raysort import _normals, procedural
 from raysort.bvh import BVH, degenerate_faces
 from raysort.camera import Camera
 from raysort.errors import ConfigError, SceneError
@@ -117,11 +117,10 @@ class Scene:
     def face_normals(self):
         """float32 (m, 3): each face's unit geometric normal, ``(v1 - v0) x (v2 - v0)``
         normalised in double (zero for a face of zero area); as stored, not facing any ray."""
-        v = self.vertices.astype(np.float64)[self.faces]
-        nrm = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-        length = np.linalg.norm(nrm, axis=1, keepdims=True)
-        nrm = np.divide(nrm, length, out=np.zeros_like(nrm), where=length > 0)
-        return np.ascontiguousarray(nrm, dtype=np.float32)
+        out = np.empty((len(self.faces), 3), np.float32)
+        _normals.face_normals(np.ascontiguousarray(self.vertices, dtype=np.float32),
+                              np.ascontiguousarray(self.faces, dtype=np.int32), out)
+        return out
 
     def degenerate_faces(self):
         """Indices of degenerate faces: kept, but never hit (see

@@ -1,5 +1,5 @@
 """``lambert``: a Lambertian path tracer (cosine-weighted diffuse bounces)."""
-from libc.math cimport sqrt, sqrtf, M_PI, INFINITY
+from libc.math cimport sqrtf, M_PI, INFINITY
 from libc.stdint cimport int32_t, uint32_t
 from raysort._rng cimport seed_key, sample_key, uniform_at
 from raysort._types cimport RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH, rs_prefetch
@@ -28,63 +28,41 @@ cdef enum:
     FACE_FLOATS = 8
 
 
-def _face_records(const float[:, ::1] vertices, const int32_t[:, ::1] faces,
-                  const float[:, ::1] albedo, const float[:, ::1] emission, float[:, ::1] out,
-                  float[:, ::1] emitters):
-    """Fill ``out`` (m, FACE_FLOATS) with the face records in one pass: the normal of
-    :meth:`raysort.scene.Scene.face_normals` bit for bit (the same double operations:
-    NumPy's cross product, the norm summed x, y, z, a zero normal for a zero length),
-    the albedo, and the row of ``emitters`` (one per face with an emission other than
-    zero, in face order; (k, 4)) that gets its emission.  IndexError at a vertex index
-    out of range; ValueError if ``emitters`` has not one row per emitting face."""
-    cdef Py_ssize_t m = faces.shape[0], nv = vertices.shape[0], f, bad = -1, e = 0
+def _face_records(const float[:, ::1] normals, const float[:, ::1] albedo,
+                  const float[:, ::1] emission, float[:, ::1] out, float[:, ::1] emitters):
+    """Fill ``out`` (m, FACE_FLOATS) with the face records in one pass: the normal
+    (:meth:`raysort.scene.Scene.face_normals`), the albedo, and the row of ``emitters``
+    (one per face with an emission other than zero, in face order; (k, 4)) that gets its
+    emission.  ValueError if ``emitters`` has not one row per emitting face."""
+    cdef Py_ssize_t m = normals.shape[0], f, e = 0
     cdef Py_ssize_t k = emitters.shape[0]
     cdef int a
-    cdef int32_t i0, i1, i2
-    cdef double e0[3]
-    cdef double e1[3]
-    cdef double c[3]
-    cdef double length
+    cdef bint short = False
     cdef float *rec
-    if (faces.shape[1] != 3 or vertices.shape[1] != 3 or albedo.shape[0] != m
-            or albedo.shape[1] != 3 or emission.shape[0] != m or emission.shape[1] != 3
-            or out.shape[0] != m or out.shape[1] != FACE_FLOATS or emitters.shape[1] != 4):
-        raise ValueError("_face_records: vertices (n, 3), faces, albedo, emission (m, 3), "
+    if (normals.shape[1] != 3 or albedo.shape[0] != m or albedo.shape[1] != 3
+            or emission.shape[0] != m or emission.shape[1] != 3 or out.shape[0] != m
+            or out.shape[1] != FACE_FLOATS or emitters.shape[1] != 4):
+        raise ValueError("_face_records: normals, albedo, emission (m, 3), "
                          "out (m, FACE_FLOATS) and emitters (k, 4) expected")
     with nogil:
         for f in range(m):
-            i0 = faces[f, 0]
-            i1 = faces[f, 1]
-            i2 = faces[f, 2]
-            if not (0 <= i0 < nv and 0 <= i1 < nv and 0 <= i2 < nv):
-                bad = f
-                break
-            for a in range(3):
-                e0[a] = <double>vertices[i1, a] - <double>vertices[i0, a]
-                e1[a] = <double>vertices[i2, a] - <double>vertices[i0, a]
-            c[0] = e0[1] * e1[2] - e0[2] * e1[1]
-            c[1] = e0[2] * e1[0] - e0[0] * e1[2]
-            c[2] = e0[0] * e1[1] - e0[1] * e1[0]
-            length = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
             rec = &out[f, 0]
             for a in range(FACE_FLOATS):
                 rec[a] = 0.0
             for a in range(3):
-                rec[FACE_NORMAL + a] = <float>(c[a] / length) if length > 0 else <float>0.0
+                rec[FACE_NORMAL + a] = normals[f, a]
                 rec[FACE_ALBEDO + a] = albedo[f, a]
             (<int32_t *> rec)[FACE_EMITTER] = -1
             if (emission[f, 0] != 0) | (emission[f, 1] != 0) | (emission[f, 2] != 0):
                 if e == k:
-                    bad = -2
+                    short = True
                     break
                 (<int32_t *> rec)[FACE_EMITTER] = <int32_t> e
                 for a in range(4):
                     emitters[e, a] = emission[f, a] if a < 3 else <float>0.0
                 e += 1
-    if bad == -2 or (bad == -1 and e != k):
+    if short or e != k:
         raise ValueError(f"_face_records: emitters has {k} rows, not one per emitting face")
-    if bad >= 0:
-        raise IndexError(f"_face_records: face {bad} names a vertex beyond the {nv} vertices")
 
 
 #: the face record's layout, for Python (tests)
@@ -280,8 +258,7 @@ class LambertShader(Shader):
         emission = np.ascontiguousarray(scene.emission, dtype=np.float32)
         faces = aligned_empty((len(scene.faces), FACE_FLOATS), np.float32, FACE_FLOATS * 4)
         emitters = np.empty((np.count_nonzero(emission.any(axis=1)), 4), np.float32)
-        _face_records(np.ascontiguousarray(scene.vertices, dtype=np.float32),
-                      np.ascontiguousarray(scene.faces, dtype=np.int32),
+        _face_records(scene.face_normals(),
                       np.ascontiguousarray(scene.albedo, dtype=np.float32), emission, faces,
                       emitters)
         self._prepared = (

@@ -119,15 +119,11 @@ def test_face_records_match_the_scene_bit_for_bit(name):
     assert len(emitters) > 0 or name in ("sibenik", "forest")
 
 
-def test_face_records_reject_a_vertex_index_out_of_range():
+def test_face_records_reject_an_emitters_table_of_the_wrong_size():
     scene = degenerate_mesh_scene()
-    faces = scene.faces.copy()
-    faces[7, 2] = len(scene.vertices)
-    out = np.empty((len(faces), lambert.FACE_LAYOUT["floats"]), np.float32)
+    out = np.empty((len(scene.faces), lambert.FACE_LAYOUT["floats"]), np.float32)
     emitters = np.empty((np.count_nonzero(scene.emission.any(axis=1)), 4), np.float32)
-    with pytest.raises(IndexError, match="face 7"):
-        lambert._face_records(scene.vertices, faces, scene.albedo, scene.emission, out,
-                              emitters)
-    with pytest.raises(ValueError, match="one per emitting face"):
-        lambert._face_records(scene.vertices, scene.faces, scene.albedo, scene.emission, out,
-                              emitters[1:])
+    for rows in (emitters[1:], np.empty((len(emitters) + 1, 4), np.float32)):
+        with pytest.raises(ValueError, match="one per emitting face"):
+            lambert._face_records(scene.face_normals(), scene.albedo, scene.emission, out,
+                                  rows)
