@@ -62,6 +62,19 @@ def _round4(n):
     return (int(n) + 3) & ~3
 
 
+def _row_lanes(lanes):
+    """Lanes per row of a block of rows holding ``lanes`` values each: a multiple of 4
+    (at least 4) and, from 1024 lanes (4 kB) up, one cache line past a multiple of 1024.
+    Rows a power-of-two multiple of 4 kB apart (a 256x256 batch: 256 kB) map a kernel's
+    loads and stores at one lane to the same sets of the L1 and L2 caches, which then
+    evict each other's lines: the gather of 65,536 rays took 0.25 ms with rows
+    65,536 lanes apart and 0.16 ms with 65,552 (Zen 3, AVX2)."""
+    lanes = max(_round4(lanes), 4)
+    if lanes < 1024 or lanes > MAX_RAYS - 1024:
+        return lanes
+    return -(-(lanes - 16) // 1024) * 1024 + 16
+
+
 def aligned_empty(shape, dtype, align=ALIGN):
     """An uninitialised C-contiguous array whose data starts ``align``-aligned."""
     dtype = np.dtype(dtype)
@@ -161,7 +174,7 @@ class RayBatch:
         """Rows for ``n`` rays: lanes ``[0, n)`` uninitialised, the padding set."""
         self.n = n
         self.prev_t = None
-        capacity = max(_round4(n), 4)
+        capacity = _row_lanes(n)
         self.data = _recycler.take(len(RAY_ROWS) * capacity * 4).view(np.float32).reshape(
             len(RAY_ROWS), capacity)
         self.data[:, n:] = 0.0
@@ -309,7 +322,7 @@ class Packets:
     def __init__(self, counts, _extra_rows=0):
         self.counts = counts = np.ascontiguousarray(counts, dtype=np.int32)
         self.starts = np.empty(len(counts), dtype=np.int32)
-        capacity = isa.module("_gather").layout(counts, self.starts)
+        capacity = _row_lanes(isa.module("_gather").layout(counts, self.starts))
         # one block: the packet rows, then prim, u, v, index (and the caller's extra rows)
         lane_bytes = capacity * 4
         rows, prim, u, v, index, *extra = _carve(len(PACKET_ROWS) * lane_bytes,

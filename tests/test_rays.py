@@ -52,8 +52,8 @@ def check_layout(packets, order, offsets):
         if len(counts) else np.zeros(0)
     assert np.array_equal(packets.starts, expected_starts)
     assert (packets.starts % 4 == 0).all()
-    cap = packets.capacity
-    assert cap % 4 == 0 and cap >= max(4, sum(round4(c) for c in counts))
+    cap, used = packets.capacity, max(4, sum(round4(c) for c in counts))
+    assert spread_rows(cap) and used <= cap <= used + 1024
     for arr in (packets.prim, packets.u, packets.v, packets.index):
         assert arr.shape == (cap,)
     expected_index = np.full(cap, -1, dtype=np.int64)
@@ -82,13 +82,25 @@ def check_inactive(packets, lanes, label):
 
 # -- RayBatch ---------------------------------------------------------------------------
 
-@pytest.mark.parametrize("n", [0, 1, 3, 4, 5, 8, 1023, 4097])
+def spread_rows(lanes):
+    """Rows of 4 kB or more (1024 lanes) sit one cache line past a multiple of 4 kB
+    apart, so a kernel's accesses at one lane of every row fall in different cache sets;
+    shorter rows are not padded beyond the multiple of 4."""
+    return lanes % 1024 == 16 if lanes >= 1024 else lanes % 4 == 0
+
+
+@pytest.mark.parametrize("n", [0, 1, 3, 4, 5, 8, 1008, 1023, 1024, 1040, 4097, 65536])
 def test_raybatch_layout(n):
-    """Capacity a multiple of 4 (at least 4), rows 16-byte aligned, padding inactive."""
+    """Capacity a multiple of 4 (at least 4, its rows spread over the cache sets), rows
+    16-byte aligned, padding inactive."""
     b = RayBatch(n)
     assert len(b) == n and b.n == n
     assert b.data.dtype == np.float32 and b.data.flags.c_contiguous
-    assert b.data.shape == (len(RayRow), max(4, round4(n)))
+    capacity = b.data.shape[1]
+    assert b.data.shape[0] == len(RayRow) and spread_rows(capacity)
+    assert max(4, round4(n)) <= capacity <= max(4, round4(n)) + 1024
+    if n < 1008:
+        assert capacity == max(4, round4(n))
     for r in RayRow:
         assert_aligned(b.data[r], f"row {r.name}")
     assert (b.data[:, :n] == 0).all()

