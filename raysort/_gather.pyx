@@ -18,7 +18,7 @@ import numpy as np
 cdef extern from "raysort/gather.h" nogil:
     int64_t rs_gather_lanes(float *const dst[RS_PACKET_ROWS], int32_t *prim, float *u,
                             float *v, float *tmax, const float *const src[RS_RAY_ROWS],
-                            const int32_t *index, int64_t capacity)
+                            const int32_t *index, int64_t capacity, int64_t n_src)
 
 
 cdef enum:
@@ -189,7 +189,7 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
             for j in range(end, capacity):      # lanes after the last sub-packet
                 index[j] = -1
             bad_lane = rs_gather_lanes(dst_rows, &prim[0], &u[0], &v[0], tmax, src_rows,
-                                       &index[0], capacity)
+                                       &index[0], capacity, src.shape[1])
     if order_bad:
         return False, -1
     return True, (index[bad_lane] if bad_lane >= 0 else -1)

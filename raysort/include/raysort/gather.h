@@ -25,8 +25,9 @@
 
 #include "lanes.h"
 
-/* Lanes between a block and the ray whose rows it prefetches (rs_gather_lanes). */
-#define RS_GATHER_AHEAD 256
+/* Rays between a block's first lane and the rays whose rows it prefetches
+ * (rs_gather_lanes): one large packet of the pipeline (a 32x32 tile). */
+#define RS_GATHER_AHEAD 1024
 
 /* Whether the lanes ids[j..j + RS_SW) hold consecutive rays (no padding): the rays
  * of an unsorted batch (sorter `none`), whose rows load as vectors instead of
@@ -90,25 +91,30 @@ RS_INLINE int rs_gather_block(float *const dst[RS_PACKET_ROWS], int32_t *prim, f
 }
 
 /* Lanes [0, capacity) of the packet rows dst, prim, u, v (and tmax unless NULL)
- * from the rays index[lane] of the rows src.  Every index is -1 or a lane of src,
- * which holds at least one.  Lanes past the last full block go through a
+ * from the rays index[lane] of the rows src, of n_src lanes each.  Every index is
+ * -1 or a lane of src, which holds at least one.  Lanes past the last full block go through a
  * block-sized scratch.  Returns the first lane holding a ray that breaks the ray
  * contract (stored inactive), or -1. */
 static int64_t rs_gather_lanes(float *const dst[RS_PACKET_ROWS], int32_t *prim, float *u,
                                float *v, float *tmax, const float *const src[RS_RAY_ROWS],
-                               const int32_t *index, int64_t capacity)
+                               const int32_t *index, int64_t capacity, int64_t n_src)
 {
     int64_t j = 0, first_bad = -1;
     int bits;
-    /* The rows of the ray of the lane RS_GATHER_AHEAD lanes on, once per block: the
-     * hardware prefetcher follows the sequential rays of an unsorted batch only part
-     * of the way with a batch's 19 rows in flight.  Prefetching every lane's ray
-     * (sorted rays, random within their large packet) made the gather slower, 0.48
-     * against 0.36 ms per 65,536 sorted rays with the caches warm (Zen 3, AVX2). */
+    /* Per block, one line of every row RS_GATHER_AHEAD rays past the block's
+     * first lane: lanes hold about as many rays as their number, and a sorter
+     * reorders rays only within a large packet, so this streams in the rows of
+     * the packets to come, sorted or not (the hardware prefetcher follows them
+     * only part of the way with 19 rows in flight; prefetching each lane's own
+     * ray, random within its packet, made the gather slower).  After a trace,
+     * Zen 3, AVX2: sorted rays 0.44-0.61 -> 0.36-0.48 ms per 65,536, unsorted
+     * 0.28-0.41 -> 0.23-0.30 ms (512 and 2048 rays ahead measured the same). */
     for (; j + RS_SW <= capacity; j += RS_SW) {
-        if (j + RS_GATHER_AHEAD < capacity && index[j + RS_GATHER_AHEAD] >= 0)
+        {
+            int64_t r = j + RS_GATHER_AHEAD < n_src ? j + RS_GATHER_AHEAD : n_src - 1;
             for (int c = 0; c < RS_RAY_ROWS; ++c)
-                rs_prefetch(src[c] + index[j + RS_GATHER_AHEAD]);
+                rs_prefetch(src[c] + r);
+        }
         if ((bits = rs_gather_block(dst, prim, u, v, tmax, src, index, j)) && first_bad < 0)
             first_bad = j + rs_lowest(bits);
     }
