@@ -1,6 +1,7 @@
 """The pinhole camera shared by generators."""
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -45,8 +46,12 @@ class Camera:
             raise ConfigError("camera up must not be parallel to the view direction")
 
     def frame(self, width, height):
-        """``(eye, forward, right, up)`` as float32; ``right`` and ``up`` span the
-        image plane at distance 1 (scaled by the field of view and aspect)."""
+        """``(eye, forward, right, up)`` as read-only float32 arrays; ``right`` and ``up``
+        span the image plane at distance 1 (scaled by the field of view and aspect).
+        Computed once per camera and image size (a render asks once per tile)."""
+        return _frame(self, width, height)
+
+    def _frame(self, width, height):
         forward = np.subtract(self.look_at, self.eye)
         forward /= np.linalg.norm(forward)
         right = np.cross(forward, self.up)
@@ -54,8 +59,11 @@ class Camera:
         up = np.cross(right, forward)
         half = math.tan(math.radians(self.vfov) / 2)
         aspect = width / height
-        return tuple(np.asarray(v, dtype=np.float32) for v in
-                     (self.eye, forward, right * half * aspect, up * half))
+        out = tuple(np.asarray(v, dtype=np.float32) for v in
+                    (self.eye, forward, right * half * aspect, up * half))
+        for v in out:
+            v.setflags(write=False)
+        return out
 
     @classmethod
     def framing(cls, lo, hi, vfov=60.0):
@@ -65,3 +73,8 @@ class Camera:
         dist = radius / math.sin(math.radians(vfov) / 2)
         eye = centre + dist * np.array([0.0, 0.35, -0.94])
         return cls(tuple(eye), tuple(centre), (0.0, 1.0, 0.0), vfov)
+
+
+@functools.lru_cache(maxsize=64)
+def _frame(camera, width, height):
+    return camera._frame(width, height)

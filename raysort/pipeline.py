@@ -22,6 +22,7 @@ How a render is organised (and why it is deterministic):
 """
 from __future__ import annotations
 
+import functools
 import inspect
 import operator
 import os
@@ -57,13 +58,17 @@ _BVH_PARAMETERS = tuple(p.name for p in inspect.signature(BVH).parameters.values
                         if p.kind == p.KEYWORD_ONLY)
 
 
+@functools.lru_cache(maxsize=16)
 def morton_order(width, height):
-    """Local pixel indices ``y * width + x`` of a tile, in Morton (Z) order."""
+    """Local pixel indices ``y * width + x`` of a tile, in Morton (Z) order (a read-only
+    array, made once per tile size)."""
     y, x = np.divmod(np.arange(width * height, dtype=np.int64), width)
     code = np.zeros_like(x)
     for bit in range(7):
         code |= ((x >> bit) & 1) << (2 * bit) | ((y >> bit) & 1) << (2 * bit + 1)
-    return np.argsort(code, kind="stable").astype(np.int32)
+    order = np.argsort(code, kind="stable").astype(np.int32)
+    order.setflags(write=False)
+    return order
 
 
 @dataclass
@@ -91,9 +96,17 @@ class RenderStats:
         for d, n in other.rays.items():
             self.rays[d] = self.rays.get(d, 0) + n
         for d, c in other.counters.items():
-            self.counters[d] = self.counters.get(d, Counters()) + c
+            total = self.depth_counters(d)
+            total += c
         self.shadow_rays += other.shadow_rays
-        self.shadow_counters = self.shadow_counters + other.shadow_counters
+        self.shadow_counters += other.shadow_counters
+
+    def depth_counters(self, depth):
+        """The running total of the counters of ``depth`` (created at 0)."""
+        total = self.counters.get(depth)
+        if total is None:
+            total = self.counters[depth] = Counters()
+        return total
 
     @property
     def total_rays(self):
@@ -398,7 +411,7 @@ class Pipeline:
             parts = [run(batch)]
         total = Counters()
         for counters in parts:
-            total = total + contract.check_counters(self.traversal, counters)
+            total += contract.check_counters(self.traversal, counters)
         return total
 
     # ------------------------------------------------------------------
@@ -512,7 +525,8 @@ class Pipeline:
             while len(rays):
                 hits, counters = self._trace(rays, packets, False, stats.stage_seconds, 1, maker)
                 stats.rays[depth] = stats.rays.get(depth, 0) + len(rays)
-                stats.counters[depth] = stats.counters.get(depth, Counters()) + counters
+                total = stats.depth_counters(depth)
+                total += counters
                 if tap is not None:
                     tap(Traced(tile, depth, False, rays, packets, hits, paths))
                 clock.lap(None)
@@ -549,7 +563,7 @@ class Pipeline:
         if tap is not None:
             tap(Traced(tile, depth, True, shadow.rays, boundaries, occluded))
         stats.shadow_rays += len(shadow.rays)
-        stats.shadow_counters = stats.shadow_counters + counters
+        stats.shadow_counters += counters
         clock = _Clock(stats.stage_seconds)
         add_unoccluded(radiance, shadow.slot, shadow.contribution, occluded)
         clock.lap("shade")

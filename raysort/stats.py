@@ -53,6 +53,19 @@ class Counters:
         out.available = self.available and other.available
         return out
 
+    def __iadd__(self, other):
+        """Add ``other`` into this object (for a caller's own running total: one
+        object per render, not one per batch)."""
+        if not isinstance(other, Counters):
+            return NotImplemented
+        for name in WHOLE_NUMBERS:
+            setattr(self, name, getattr(self, name) + getattr(other, name))
+        if other.stream_level_rays:
+            self.stream_level_rays = _add_levels(self.stream_level_rays,
+                                                 other.stream_level_rays)
+        self.available = self.available and other.available
+        return self
+
     def per_ray(self):
         """Each counter divided by the rays submitted (None when not available)."""
         if not self.available:

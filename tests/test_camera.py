@@ -157,6 +157,18 @@ def test_vfov_rejects_booleans():
         Camera((0, 0, 0), (0, 0, 1), vfov=True)
 
 
+@pytest.mark.parametrize("cam", CAMERAS)
+def test_frame_is_made_once_per_size_and_read_only(cam):
+    """A render asks once per tile: the same read-only arrays come back, equal bit for
+    bit to a fresh computation, and a different size gets its own frame."""
+    first, again = cam.frame(7, 5), cam.frame(7, 5)
+    assert all(a is b for a, b in zip(first, again))
+    assert not any(v.flags.writeable for v in first)
+    for a, b in zip(first, cam._frame(7, 5)):
+        assert np.array_equal(a.view(np.uint32), b.view(np.uint32))
+    assert not np.array_equal(cam.frame(7, 5)[2], cam.frame(5, 5)[2])
+
+
 @pytest.mark.parametrize("vfov", [np.float32(45.0), np.int64(45), np.float64(45.0)])
 def test_vfov_accepts_numpy_scalars(vfov):
     """A NumPy number in range is a valid vfov (e.g. read from an array); the frame matches

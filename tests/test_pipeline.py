@@ -295,3 +295,20 @@ def test_shader_that_returns_garbage_is_named():
 
     with pytest.raises(PluginContractError, match="garbage_test"):
         _with_plugin("shaders", "garbage_test", Garbage)
+
+
+@pytest.mark.parametrize("size", [(1, 1), (3, 5), (8, 8), (32, 32), (17, 32)])
+def test_morton_order_is_the_z_order_of_the_tile(size):
+    """Every pixel of the tile once, in the order of its interleaved bits (x in the even
+    bits), ties impossible; the array is made once per size and read-only."""
+    from raysort.pipeline import morton_order
+    w, h = size
+    order = morton_order(w, h)
+
+    def z(index):
+        y, x = divmod(index, w)
+        return sum(((x >> b) & 1) << (2 * b) | ((y >> b) & 1) << (2 * b + 1) for b in range(8))
+
+    assert sorted(order.tolist()) == list(range(w * h))
+    assert order.tolist() == sorted(range(w * h), key=z)
+    assert morton_order(w, h) is order and not order.flags.writeable

@@ -84,7 +84,7 @@ class PinholeGenerator(Generator):
         eye, fwd, right, up = camera.frame(width, height)
         root = math.isqrt(spp)
         strata = root if root * root == spp else 1
-        rays = RayBatch(len(pixels) * len(samples))
+        rays = RayBatch._unfilled(len(pixels) * len(samples))    # _generate writes every row
         _generate(eye, fwd, right, up, pixels, samples, width, height, strata, self.jitter,
                   seed & 0xFFFFFFFF, rays.data)
         return rays

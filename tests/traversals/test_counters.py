@@ -414,6 +414,21 @@ def test_counters_add():
     assert raysort.Counters().per_ray() == {k: 0.0 for k in ("ia", "box1", "box4", "tri1", "tri4")}
 
 
+def test_counters_add_in_place_like_add():
+    """``total += c`` gives what ``total + c`` gives, in ``total`` itself, and leaves
+    ``c`` alone (the pipeline's running totals), stream levels included."""
+    a = raysort.Counters(rays=1, ia=2, box1=3, box4=4, tri1=5, tri4=6, stream_tasks=7,
+                         stream_rays=8, stream_level_rays=(8, 3))
+    b = raysort.Counters(rays=10, ia=20, box1=30, box4=40, tri1=50, tri4=60, stream_tasks=70,
+                         stream_rays=80, stream_level_rays=(80, 30, 5), available=False)
+    want = (a + b).as_dict()
+    total, before = a, b.as_dict()
+    total += b
+    assert total is a and total.as_dict() == want
+    assert b.as_dict() == before
+    assert want["stream_level_rays"] == [88, 33, 5] and want["available"] is False
+
+
 # ---------------------------------------------------------------------------
 # wide: one 4-wide test of a node's (up to) four child boxes per node visited
 # ---------------------------------------------------------------------------
