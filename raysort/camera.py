@@ -49,9 +49,9 @@ class Camera:
         """``(eye, forward, right, up)`` as read-only float32 arrays; ``right`` and ``up``
         span the image plane at distance 1 (scaled by the field of view and aspect).
         Computed once per camera and image size (a render asks once per tile)."""
-        return _frame(self, width, height)
+        return _cached_frame(self, width, height)
 
-    def _frame(self, width, height):
+    def _make_frame(self, width, height):
         forward = np.subtract(self.look_at, self.eye)
         forward /= np.linalg.norm(forward)
         right = np.cross(forward, self.up)
@@ -76,5 +76,5 @@ class Camera:
 
 
 @functools.lru_cache(maxsize=64)
-def _frame(camera, width, height):
-    return camera._frame(width, height)
+def _cached_frame(camera, width, height):
+    return camera._make_frame(width, height)

@@ -1,7 +1,7 @@
 """Work counters (the paper's Table I) and per-stage timings."""
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 __all__ = ["Counters", "COUNTER_LABELS"]
 
@@ -47,10 +47,8 @@ class Counters:
     def __add__(self, other):
         if not isinstance(other, Counters):
             return NotImplemented
-        out = Counters(**{name: getattr(self, name) + getattr(other, name)
-                          for name in WHOLE_NUMBERS})
-        out.stream_level_rays = _add_levels(self.stream_level_rays, other.stream_level_rays)
-        out.available = self.available and other.available
+        out = replace(self)
+        out += other
         return out
 
     def __iadd__(self, other):

@@ -164,7 +164,7 @@ def test_frame_is_made_once_per_size_and_read_only(cam):
     first, again = cam.frame(7, 5), cam.frame(7, 5)
     assert all(a is b for a, b in zip(first, again))
     assert not any(v.flags.writeable for v in first)
-    for a, b in zip(first, cam._frame(7, 5)):
+    for a, b in zip(first, cam._make_frame(7, 5)):
         assert np.array_equal(a.view(np.uint32), b.view(np.uint32))
     assert not np.array_equal(cam.frame(7, 5)[2], cam.frame(5, 5)[2])
 
