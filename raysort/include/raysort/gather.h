@@ -107,8 +107,9 @@ static int64_t rs_gather_lanes(float *const dst[RS_PACKET_ROWS], int32_t *prim, 
      * the packets to come, sorted or not (the hardware prefetcher follows them
      * only part of the way with 19 rows in flight; prefetching each lane's own
      * ray, random within its packet, made the gather slower).  After a trace,
-     * Zen 3, AVX2: sorted rays 0.44-0.61 -> 0.36-0.48 ms per 65,536, unsorted
-     * 0.28-0.41 -> 0.23-0.30 ms (512 and 2048 rays ahead measured the same). */
+     * Zen 3, AVX2, against prefetching the rows of one lane's ray per block:
+     * sorted rays 0.44-0.61 -> 0.36-0.48 ms per 65,536, unsorted 0.28-0.41 ->
+     * 0.23-0.30 ms (512 and 2048 rays ahead measured the same). */
     for (; j + RS_SW <= capacity; j += RS_SW) {
         {
             int64_t r = j + RS_GATHER_AHEAD < n_src ? j + RS_GATHER_AHEAD : n_src - 1;
