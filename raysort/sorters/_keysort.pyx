@@ -91,7 +91,6 @@ cdef extern from *:
     #include "raysort/simd.h"
     /* c ? a : b, as a select the compiler vectorises (a Cython conditional is a branch) */
     static inline float rs_keysort_pick(int c, float a, float b) { return c ? a : b; }
-    static inline int rs_keysort_pick_int(int c, int a, int b) { return c ? a : b; }
     /* out[j] = 1 / sqrt(x[j]), eight at a time with AVX2, four with SSE: a loop of sqrtf
      * calls does not vectorise (errno), and SQRTPS rounds exactly as sqrtf does */
     static inline void rs_keysort_inv_sqrt(const float *x, float *out, int m)
@@ -135,6 +134,31 @@ cdef extern from *:
         for (; j < m; ++j)
             q[j] = (int32_t)(rs_minf(rs_maxf(c[j], 0.0f), 1.0f) * 65535.0f);
     }
+    /* One pass of the packed radix sort: key i goes to dst[h[digit]++], digit = (key >> shift)
+     * & dmask; with out, also out[c] = base + (key & low), the ray index a packed key
+     * carries, in sorted order.  Its own function, not inlined into the sort's many loops,
+     * so that the loop keeps everything in registers (inlined, the same loop ran 20-40 %
+     * slower, by the build).  (Placing the second half of the keys backwards from each
+     * bucket's end, two independent chains of counter updates, was slower still.) */
+    __attribute__((noinline))
+    static void rs_keysort_scatter(const uint64_t *src, uint64_t *dst, int32_t *out, int n,
+                                   int shift, uint64_t dmask, int32_t *h, int32_t base,
+                                   uint64_t low)
+    {
+        if (out == NULL) {
+            for (int i = 0; i < n; ++i) {
+                uint64_t k = src[i];
+                dst[h[(k >> shift) & dmask]++] = k;
+            }
+            return;
+        }
+        for (int i = 0; i < n; ++i) {
+            uint64_t k = src[i];
+            int32_t c = h[(k >> shift) & dmask]++;
+            dst[c] = k;
+            out[c] = base + (int32_t)(k & low);
+        }
+    }
     /* the highest and lowest set bit of a nonzero x */
     static inline int rs_keysort_clz64(uint64_t x)
     {
@@ -158,11 +182,13 @@ cdef extern from *:
     }
     """
     float pick "rs_keysort_pick"(bint c, float a, float b) noexcept nogil
-    int pick_int "rs_keysort_pick_int"(bint c, int a, int b) noexcept nogil
     void inv_sqrt "rs_keysort_inv_sqrt"(const float *x, float *out, int m) noexcept nogil
     void quantise "rs_keysort_quantise"(const float *c, int32_t *q, int m) noexcept nogil
     int clz64 "rs_keysort_clz64"(uint64_t x) noexcept nogil
     int ctz64 "rs_keysort_ctz64"(uint64_t x) noexcept nogil
+    void scatter_pass "rs_keysort_scatter"(const uint64_t *src, uint64_t *dst, int32_t *out,
+                                           int n, int shift, uint64_t dmask, int32_t *h,
+                                           int32_t base, uint64_t low) noexcept nogil
 
 
 cdef struct KeyInputs:
@@ -549,14 +575,18 @@ def _digit_plan(uint64_t vary, int n, int floor=0):
 
 
 cdef int radix_sort(uint64_t *key, int32_t *item, uint64_t *key_tmp, int32_t *item_tmp,
-                    int n, int low_bit, int width, int passes, int32_t *count) noexcept nogil:
+                    int n, int low_bit, int width, int passes, int32_t *count,
+                    int32_t *out, int32_t base, uint64_t low) noexcept nogil:
     """Stable LSD radix sort of (key, item) by ``passes`` digits of ``width`` bits,
     the lowest at bit ``low_bit``; item may be NULL (the item is then in the key's
     low bits).  ``count[p << width:(p + 1) << width]`` holds the histogram of digit
     p of the keys; the sort uses it up.
 
+    With ``out`` (only when item is NULL), the sort also writes ``base + (key & low)``
+    of each sorted key to out (the ray index a packed key carries), in its last pass.
+
     Returns 1 when the result is in the tmp arrays, 0 when in key/item."""
-    cdef int i, p, shift, flip = 0, buckets = 1 << width
+    cdef int i, p, shift, flip = 0, last = -1, buckets = 1 << width
     cdef int32_t pos, c
     cdef int32_t *h
     cdef uint64_t *ks = key
@@ -567,21 +597,24 @@ cdef int radix_sort(uint64_t *key, int32_t *item, uint64_t *key_tmp, int32_t *it
     cdef int32_t *it
     cdef uint64_t k, dmask = <uint64_t> buckets - 1
     for p in range(passes):
+        # every key has this digit: the pass would not move anything
+        if count[p * buckets + ((key[0] >> (low_bit + p * width)) & dmask)] != n:
+            last = p
+    if out != NULL and last < 0:
+        for i in range(n):
+            out[i] = base + <int32_t> (ks[i] & low)
+    for p in range(last + 1):
         shift = low_bit + p * width
         h = count + p * buckets
         if h[(key[0] >> shift) & dmask] == n:
-            continue                # every key has this digit: the pass would not move anything
+            continue
         pos = 0
         for i in range(buckets):
             c = h[i]
             h[i] = pos
             pos += c
         if item == NULL:
-            for i in range(n):
-                k = ks[i]
-                c = h[(k >> shift) & dmask]
-                h[(k >> shift) & dmask] = c + 1
-                kd[c] = k
+            scatter_pass(ks, kd, out if p == last else NULL, n, shift, dmask, h, base, low)
         else:
             for i in range(n):
                 k = ks[i]
@@ -606,13 +639,12 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     """Sort rays [start, end), whose keys are keys[0, end - start), into
     order[start:end]; write sub-packet starts to offsets and return their number.
     Work buffers hold end - start (+1) items, ``count`` :data:`COUNT_SIZE` ints."""
-    cdef int i, j, c, nc = 0, pos, last, flip, low_bit, width, passes, buckets, shift1, shift2
+    cdef int i, j, c, nc = 0, pos, flip, low_bit, width, passes, buckets, shift1, shift2
     cdef uint64_t mask, low, key, prev = 0, all_and, all_or, dmask
     cdef uint64_t *sk
     cdef int32_t *si
     cdef int32_t *h1
     cdef int32_t *h2
-    cdef bint cut
     # a chunk is every ray, or (compress) every run of equal keys in input order
     cdef int n = end - start, bits = 8 * digits
     # the chunk's index goes into the key's low bits, which the sort does not look at,
@@ -680,7 +712,9 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
             h2[(key >> shift2) & dmask] += 1
             for j in range(3, passes):
                 count[j * buckets + ((key >> (low_bit + j * width)) & dmask)] += 1
-    flip = radix_sort(ckey, items, ckey_tmp, citem_tmp, nc, low_bit, width, passes, count)
+    # (a packed sort writes the order in its last pass)
+    flip = radix_sort(ckey, items, ckey_tmp, citem_tmp, nc, low_bit, width, passes, count,
+                      order + start if simple else NULL, start, low)
     sk = ckey_tmp if flip else ckey
     si = citem_tmp if flip else citem
     if compress:
@@ -696,22 +730,48 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     elif not simple:
         for j in range(nc):
             order[start + j] = start + si[j]
-    # sub-packets: at most packet_size rays, and a new one where the key's top bits
-    # change; without branches (where the key changes is not predictable), the order of
-    # a packed sort read on the way
-    mask = 0 if split_bits == 0 else ~(<uint64_t> 0) << (64 - split_bits)
-    offsets[0] = start
-    c = 1
-    last = 0                        # (relative to start, like i)
-    if simple:
-        order[start] = start + <int> (sk[0] & low)
-    for i in range(1, n):
-        if simple:
-            order[start + i] = start + <int> (sk[i] & low)
-        cut = (i - last == packet_size) | (((sk[i] ^ sk[i - 1]) & mask) != 0)
-        offsets[c] = start + i          # kept only where cut (c moves on)
-        c += cut
-        last = pick_int(cut, i, last)
+    return cut_packets(sk, n, start, packet_size, split_bits, split_bits <= bits, offsets)
+
+
+cdef int cut_packets(const uint64_t *sk, int n, int start, int packet_size, int split_bits,
+                     bint grouped, int32_t *offsets) noexcept nogil:
+    """Cut keys ``sk[0, n)`` of rays [start, start + n) into sub-packets: a new one
+    where the key's top ``split_bits`` bits change, and after every ``packet_size``
+    rays of the same top bits.  Writes the sub-packets' starts to ``offsets`` and
+    returns their number.  ``grouped``: keys with the same top bits are next to each
+    other (they are sorted on them), so each group's end is found by a search, not
+    by looking at every key."""
+    cdef uint64_t mask = 0 if split_bits == 0 else ~(<uint64_t> 0) << (64 - split_bits)
+    cdef uint64_t top
+    cdef int c = 0, g = 0, i, end, lo, hi, mid, step
+    while g < n:
+        # the group of keys with sk[g]'s top bits: [g, end)
+        end = n
+        if mask != 0:
+            top = sk[g] & mask
+            if grouped:
+                # doubling steps, then halving: sk[lo] is in the group, hi is past it
+                step = 1
+                while g + step < n and (sk[g + step] & mask) == top:
+                    step *= 2
+                lo, hi = g + step // 2, min(g + step, n)
+                while hi - lo > 1:
+                    mid = (lo + hi) // 2
+                    if (sk[mid] & mask) == top:
+                        lo = mid
+                    else:
+                        hi = mid
+                end = hi
+            else:
+                end = g + 1
+                while end < n and (sk[end] & mask) == top:
+                    end += 1
+        i = g
+        while i < end:
+            offsets[c] = start + i
+            c += 1
+            i += packet_size
+        g = end
     return c
 
 

@@ -220,8 +220,10 @@ def reference_offsets(keys_sorted, packets, packet_size, split_bits):
 
 @pytest.mark.parametrize("compress", [False, True])
 @pytest.mark.parametrize("digits,packet_size,split_bits", [(1, 64, 0), (3, 7, 5), (8, 4096, 0),
-                                                           (4, 64, 12)])
+                                                           (4, 64, 12), (1, 16, 20)])
 def test_sort_keys_is_a_stable_sort(rng, compress, digits, packet_size, split_bits):
+    """(The last case splits on more bits than it sorts: runs of the same top bits are
+    then not contiguous, and every change of them cuts.)"""
     n = 3000
     packets = np.array([0, 0, 5, 1029, 1029, 2500, 3000], np.int32)
     keys = rng.integers(0, 2**63, size=n, dtype=np.uint64) << np.uint64(1)
