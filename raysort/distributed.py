@@ -24,8 +24,9 @@ which runs them as tasks on the workers of a ``dask.distributed.Client``:
 * **Tasks** are groups of tiles (:func:`tiles_per_task`, or the Dask config
   ``raysort.tiles-per-task``), large enough that
   Dask's cost per task stays small against the work, and small enough that
-  every worker thread gets several.  Each tile is rendered by the same
-  ``Pipeline._render_tile`` the local threads use; the client assembles
+  every worker thread gets several.  A task renders its tiles as the local
+  threads do (``Pipeline._render_tiles``, several tiles per batch at low spp);
+  the client assembles
   finished tiles in place, so the image is bit-identical to a local render
   whatever the number of workers, threads or tiles per task.
 * **Failures**: when a worker dies its tasks run again elsewhere (the image
@@ -221,8 +222,10 @@ def _plugin_config(kind, plugin):
                       f"entry points, so package it and install it on every worker")
 
 
-def render_tiles(pipe, client, tiles, width, height, spp, seed):
-    """Yield ``(tile, Pipeline._render_tile(...))`` as tasks on ``client`` finish.
+def render_tiles(pipe, client, runs, width, height, spp, seed):
+    """Yield ``(tile, (radiance, stats))`` (see ``Pipeline._render_tiles``) as tasks on
+    ``client`` finish; ``runs`` are the frame's tiles in runs that share batches
+    (``Pipeline._tile_groups``), which tasks keep whole.
 
     The Dask config ``raysort.tiles-per-task`` sets how many tiles make one task
     (default: :func:`tiles_per_task`).  Closing the generator early cancels the
@@ -232,13 +235,16 @@ def render_tiles(pipe, client, tiles, width, height, spp, seed):
 
     recipe = pipeline_recipe(pipe)
     per_task = dask.config.get("raysort.tiles-per-task", None)
+    n_tiles = sum(len(run) for run in runs)
     if per_task is None:
-        per_task = tiles_per_task(len(tiles), pipe.tile * pipe.tile, spp,
+        per_task = tiles_per_task(n_tiles, pipe.tile * pipe.tile, spp,
                                   sum(client.nthreads().values()))
     elif not isinstance(per_task, int) or per_task < 1:
         raise ConfigError(f"the Dask config raysort.tiles-per-task must be a whole number "
                           f">= 1, got {per_task!r}")
-    groups = [tiles[i:i + per_task] for i in range(0, len(tiles), per_task)]
+    # whole runs per task (a run's tiles share batches, as in a local render)
+    per_task = max(1, per_task // len(runs[0])) if runs else 1
+    groups = [runs[i:i + per_task] for i in range(0, len(runs), per_task)]
     key, scene = send_scene(client, pipe.scene)
     token = uuid.uuid4().hex[:8]
     futures = [client.submit(_render_group, scene, key, recipe, group, width, height, spp,
@@ -390,9 +396,9 @@ def cache_info():
 
 
 def _render_group(scene, key, recipe, group, width, height, spp, seed):
-    """A task: render a group of tiles with the worker's cached pipeline."""
+    """A task: render a group of runs of tiles with the worker's cached pipeline."""
     pipe = worker_pipeline(scene, key, recipe)
-    return [(tile, pipe._render_tile(tile, width, height, spp, seed)) for tile in group]
+    return [done for run in group for done in pipe._render_tiles(run, width, height, spp, seed)]
 
 
 def dask_client(scheduler):

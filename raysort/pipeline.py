@@ -12,7 +12,9 @@ How a render is organised (and why it is deterministic):
   Morton order so that any power-of-4 run of rays is a square of pixels.
 * A tile's passes are processed in batches of about ``batch_rays`` rays; each
   batch goes through every bounce before the next batch starts, so memory is
-  bounded by the batch, never by image size x spp.
+  bounded by the batch, never by image size x spp.  When one tile's passes
+  are fewer rays than that (low spp), runs of tiles share batches
+  (:meth:`Pipeline._tile_groups`): fewer, larger batches, the same pixels.
 * Tiles are spread over ``threads`` worker threads (all kernels release the
   GIL), or over the workers of a Dask cluster (:mod:`raysort.distributed`).
   A tile accumulates its radiance in its own buffer in a fixed order
@@ -462,11 +464,13 @@ class Pipeline:
             from raysort import distributed
 
             stats.threads = distributed.worker_threads(client)
-            finished = distributed.render_tiles(self, client, tiles, width, height, spp, seed)
+            finished = distributed.render_tiles(self, client, self._tile_groups(tiles, spp),
+                                                width, height, spp, seed)
         else:
             self.bvh  # build before the workers start
             contract.call_plugin("shaders", self.shader, "prepare", self.scene)
-            finished = self._local_tiles(tiles, width, height, spp, seed, tap)
+            finished = self._local_tiles(self._tile_groups(tiles, spp, join=tap is None),
+                                         width, height, spp, seed, tap)
         try:
             for done, (tile, result) in enumerate(finished, 1):
                 finish(tile, result)
@@ -480,30 +484,60 @@ class Pipeline:
                         spp=spp, seed=seed, tile=self.tile)
         return RenderResult(image, stats, settings, collector.layers() if collector else {})
 
-    def _local_tiles(self, tiles, width, height, spp, seed, tap=None):
-        """``(tile, _render_tile(tile))`` as tiles finish on this process's threads."""
+    def _local_tiles(self, groups, width, height, spp, seed, tap=None):
+        """``(tile, (radiance, stats))`` as the tiles of ``groups`` (see
+        :meth:`_tile_groups`) finish on this process's threads."""
         if self.threads == 1:
-            for tile in tiles:
-                yield tile, self._render_tile(tile, width, height, spp, seed, tap)
+            for group in groups:
+                yield from self._render_tiles(group, width, height, spp, seed, tap)
             return
         with ThreadPoolExecutor(max_workers=self.threads) as pool:
-            futures = {pool.submit(self._render_tile, tile, width, height, spp, seed, tap): tile
-                       for tile in tiles}
+            futures = [pool.submit(self._render_tiles, group, width, height, spp, seed, tap)
+                       for group in groups]
             try:
                 for future in as_completed(futures):
-                    yield futures.pop(future), future.result()
+                    yield from future.result()
             finally:  # an error, or the caller stopped early: start no more tiles
                 for f in futures:
                     f.cancel()
 
+    def _tile_groups(self, tiles, spp, join=True):
+        """``tiles`` in runs that share batches: at low spp one tile's passes make a
+        small batch (the default 32x32 tiles at 4 spp: 4,096 rays), and every batch
+        costs the same Python calls between the kernels, which hold the GIL; so as
+        many tiles as their passes fill ``batch_rays`` are rendered together.  The
+        runs depend only on the frame and the pipeline, never on threads or workers
+        (the traversal's counters depend on the batches).  ``join`` False: one tile
+        per run (a ``tap`` sees one tile per record)."""
+        per_group = max(1, self.batch_rays // (self.tile * self.tile * spp)) if join else 1
+        return [tiles[i:i + per_group] for i in range(0, len(tiles), per_group)]
+
     def _render_tile(self, tile, width, height, spp, seed, tap=None):
-        x0, y0 = tile
-        w, h = min(self.tile, width - x0), min(self.tile, height - y0)
-        local = morton_order(w, h)
-        pixels = ((y0 + local // w) * width + x0 + local % w).astype(np.int32)
+        """``(radiance, stats)`` of one tile (see :meth:`_render_tiles`)."""
+        return self._render_tiles([tile], width, height, spp, seed, tap)[0][1]
+
+    def _render_tiles(self, group, width, height, spp, seed, tap=None):
+        """Render the tiles of ``group`` in shared batches: ``[(tile, (radiance, stats))]``,
+        ``radiance`` the tile's float64 sum of samples (row-major pixels); the group's
+        stats go with its first tile, the others get empty ones.
+
+        A batch holds, sample by sample, each tile's pass (one large packet); every
+        pixel's rays, random numbers and additions to its radiance are the same, in the
+        same order, as when its tile is rendered alone, so the image does not depend
+        on the grouping."""
+        starts, pixels, slots = [0], [], []
+        for x0, y0 in group:
+            w, h = min(self.tile, width - x0), min(self.tile, height - y0)
+            local = morton_order(w, h)
+            pixels.append(((y0 + local // w) * width + x0 + local % w).astype(np.int32))
+            slots.append(local + starts[-1])   # accumulator row: the tile's, then row-major
+            starts.append(starts[-1] + w * h)
+        pixels = np.concatenate(pixels) if len(group) > 1 else pixels[0]
+        slots = np.concatenate(slots) if len(group) > 1 else slots[0]
+        starts = np.asarray(starts[:-1], dtype=np.int32)
         n_pix = len(pixels)
-        slots = local                          # accumulator row = pixel's row-major index
         radiance = np.zeros((n_pix, 3), dtype=np.float64)
+        tile = group[0]                 # the tile a tap's records name (a group of one then)
         stats = RenderStats()
         clock = _Clock(stats.stage_seconds)
         per_batch = max(1, self.batch_rays // n_pix)
@@ -520,7 +554,8 @@ class Pipeline:
                 clock.lap("check")
             paths = Paths(np.tile(pixels, len(samples)), np.repeat(samples, n_pix),
                           np.tile(slots, len(samples)))
-            packets = np.arange(0, len(rays) + 1, n_pix, dtype=np.int32)
+            packets = np.append((np.arange(0, len(rays), n_pix, dtype=np.int32)[:, None]
+                                 + starts).ravel(), np.int32(len(rays)))
             depth, maker = 0, ("generators", self.generator, "generate() result")
             while len(rays):
                 hits, counters = self._trace(rays, packets, False, stats.stage_seconds, 1, maker)
@@ -554,7 +589,10 @@ class Pipeline:
                 if depth > MAX_BOUNCES and len(rays):
                     raise contract.plugin_error("shaders", self.shader, f"shade() still returns "
                                                 f"rays after {MAX_BOUNCES} bounces")
-        return radiance, stats
+        if len(group) == 1:
+            return [(tile, (radiance, stats))]
+        return [(t, (radiance[a:b], stats if i == 0 else RenderStats()))
+                for i, (t, a, b) in enumerate(zip(group, starts, [*starts[1:], n_pix]))]
 
     def _trace_shadows(self, shadow, packets, radiance, stats, tap=None, tile=None, depth=0):
         boundaries = np.searchsorted(shadow.parent, packets).astype(np.int32)

@@ -36,7 +36,8 @@ def assert_same_image(image, ref):
 
 @pytest.fixture(scope="module")
 def pipe():
-    return raysort.Pipeline("cornell", tile=16)
+    # two tiles share each batch (1024 rays a tile): tasks hold whole runs of two tiles
+    return raysort.Pipeline("cornell", tile=16, batch_rays=2048)
 
 
 @pytest.fixture(scope="module")

@@ -132,6 +132,53 @@ def test_thread_count_does_not_change_the_image(sibenik, sibenik_reference):
         assert np.array_equal(image.view(np.uint32), sibenik_reference.view(np.uint32))
 
 
+def test_tiles_share_batches_at_low_spp():
+    """As many whole tiles as fill batch_rays share a batch; never fewer than one; the
+    runs do not depend on the thread count; with a tap, one tile per run."""
+    tiles = [(x, y) for y in range(0, 96, 16) for x in range(0, 80, 16)]     # 30 tiles
+    for spp, batch_rays, per_run in ((1, 16384, 30), (4, 16384, 16), (4, 2048, 2),
+                                     (16, 2048, 1), (64, 256, 1)):
+        for threads in (1, 2):
+            pipe = raysort.Pipeline("plane", tile=16, batch_rays=batch_rays, threads=threads)
+            runs = pipe._tile_groups(tiles, spp)
+            assert [t for run in runs for t in run] == tiles
+            assert [len(run) for run in runs[:-1]] == [per_run] * (len(runs) - 1)
+            assert 1 <= len(runs[-1]) <= per_run
+            assert pipe._tile_groups(tiles, spp, join=False) == [[t] for t in tiles]
+
+
+def test_tiles_sharing_batches_give_the_same_image(sibenik):
+    """Partial tiles, several per batch or one: the same pixels bit for bit, and the
+    generator is asked for several tiles' passes at once."""
+    sizes = []
+
+    class Recording(raysort.load("generators", "pinhole")):
+        def generate(self, camera, pixels, samples, width, height, spp, seed):
+            sizes.append(len(pixels) * len(samples))
+            return super().generate(camera, pixels, samples, width, height, spp, seed)
+
+    raysort.register("generators", "recording_test", Recording)
+    try:
+        images = []
+        for batch_rays, threads in ((256, 1), (4096, 1), (4096, 2), (65536, 1)):
+            sizes.clear()
+            result = _render(sibenik, generator="recording_test", tile=16, size=(45, 37),
+                             spp=4, batch_rays=batch_rays, threads=threads)
+            images.append(result.image)
+            # 16x16 tiles at 4 spp: up to 1024 rays a tile; the 45x37 frame has 9 tiles
+            assert sum(sizes) == 45 * 37 * 4
+            if batch_rays == 256:       # one pass of one tile at a time
+                assert max(sizes) <= 256
+            elif batch_rays == 4096:    # runs of four tiles, all four passes
+                assert 1024 < max(sizes) <= 4096
+            else:                       # the whole frame in one batch
+                assert sizes == [45 * 37 * 4]
+    finally:
+        raysort.unregister("generators", "recording_test")
+    for image in images[1:]:
+        assert np.array_equal(image.view(np.uint32), images[0].view(np.uint32))
+
+
 def test_same_seed_same_exr_bytes_and_other_seed_differs(sibenik, tmp_path):
     a, b = tmp_path / "a.exr", tmp_path / "b.exr"
     _render(sibenik, seed=5).write(a)
