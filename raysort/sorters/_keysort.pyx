@@ -137,9 +137,10 @@ cdef extern from *:
     /* One pass of the packed radix sort: key i goes to dst[h[digit]++], digit = (key >> shift)
      * & dmask; with out, also out[c] = base + (key & low), the ray index a packed key
      * carries, in sorted order.  Its own function, not inlined into the sort's many loops,
-     * so that the loop keeps everything in registers (inlined, the same loop ran 20-40 %
-     * slower, by the build).  (Placing the second half of the keys backwards from each
-     * bucket's end, two independent chains of counter updates, was slower still.) */
+     * so that the loop keeps everything in registers (inlined, it reloaded its shift and
+     * end from the stack and its speed moved with unrelated edits: up to 40 % slower).
+     * (Placing the second half of the keys backwards from each bucket's end, two
+     * independent chains of counter updates, was slower.) */
     __attribute__((noinline))
     static void rs_keysort_scatter(const uint64_t *src, uint64_t *dst, int32_t *out, int n,
                                    int shift, uint64_t dmask, int32_t *h, int32_t base,
