@@ -236,6 +236,21 @@ def test_sort_keys_is_a_stable_sort(rng, compress, digits, packet_size, split_bi
                                                      split_bits))
 
 
+@pytest.mark.parametrize("share", [0.6, 0.97])
+def test_sort_keys_where_most_keys_share_digits(rng, share):
+    """Coherent rays: most keys of a large packet share every digit (the sort then
+    counts in a copy of its counters, see rs_keysort_scatter); still the stable sort."""
+    n = 4096
+    packets = np.array([0, 1024, 2048, 3000, 4096], np.int32)
+    keys = rng.integers(0, 2**63, size=n, dtype=np.uint64) << np.uint64(1)
+    keys[rng.random(n) < share] = np.uint64(0x5A3C_9600_0000_0000)
+    for digits in (1, 3):
+        order, offsets = _keysort.sort_keys(keys, packets, digits, packet_size=64,
+                                            split_bits=3)
+        assert np.array_equal(order, reference_order(keys, packets, digits))
+        assert np.array_equal(offsets, reference_offsets(keys[order], packets, 64, 3))
+
+
 @pytest.mark.parametrize("n", [1, 5, 300, 1024, 4096])
 def test_digit_plan_covers_the_varying_bits(n, rng):
     """The radix digits span every bit from the highest to the lowest varying one, are
