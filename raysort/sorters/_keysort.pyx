@@ -181,6 +181,85 @@ cdef extern from *:
             out[c] = base + (int32_t)(k & low);
         }
     }
+    /* p > 0 and p < inf (false for NaN), as one integer comparison of its bits */
+    static inline int rs_keysort_positive_finite(float p)
+    {
+        uint32_t bits;
+        memcpy(&bits, &p, sizeof bits);
+        return bits - 1u < 0x7F7FFFFFu;
+    }
+    /* c ? a : b by the bits (a select of two floats the compiler vectorises in any loop) */
+    static inline float rs_keysort_blend(int c, float a, float b)
+    {
+        uint32_t x, y, m = -(uint32_t)(c != 0);
+        memcpy(&x, &a, sizeof x);
+        memcpy(&y, &b, sizeof y);
+        x = (x & m) | (y & ~m);
+        memcpy(&a, &x, sizeof a);
+        return a;
+    }
+    /* Coordinates 0-5 of m rays for END_POINT keys into c[k * stride + j]: the origin,
+     * then o + L d/|d|, both normalised to the scene box (lo, hi, scale), where L is the
+     * estimated length (length, or prev[j] * prev_scale where prev[j] is positive and
+     * finite) clamped to tmax and to where the ray leaves the box, pulled in by shrink.
+     * One loop, its temporaries in registers (one loop per step kept them in memory),
+     * with the same IEEE operations per ray as a scalar build. */
+    static inline void rs_keysort_end_points_loop(
+        const float *restrict ox, const float *restrict oy, const float *restrict oz,
+        const float *restrict dx, const float *restrict dy, const float *restrict dz,
+        const float *restrict tmax, const float *restrict prev, int has_prev, int m,
+        float *restrict c0, float *restrict c1, float *restrict c2, float *restrict c3,
+        float *restrict c4, float *restrict c5, const float *lo, const float *hi,
+        const float *scale, float length, float prev_scale, float shrink)
+    {
+        const float lo0 = lo[0], lo1 = lo[1], lo2 = lo[2], hi0 = hi[0], hi1 = hi[1],
+                    hi2 = hi[2], sc0 = scale[0], sc1 = scale[1], sc2 = scale[2];
+        for (int j = 0; j < m; ++j) {
+            float x = dx[j], y = dy[j], z = dz[j], L = length, r, leave = INFINITY, t;
+            c0[j] = (ox[j] - lo0) * sc0;
+            c1[j] = (oy[j] - lo1) * sc1;
+            c2[j] = (oz[j] - lo2) * sc2;
+            /* d / |d| (inf or NaN for a zero or non-finite direction: its key is then
+             * arbitrary) */
+            float iv = 1.0f / sqrtf(x * x + y * y + z * z);
+            float ux = x * iv, uy = y * iv, uz = z * iv;
+            if (has_prev) {
+                float p = prev[j], scaled = p * prev_scale;
+                L = rs_keysort_blend(rs_keysort_positive_finite(p), scaled, length);
+            }
+            /* where the ray leaves the scene box (for an origin inside it) */
+            r = 1.0f / ux;
+            leave = rs_minf(leave, rs_maxf((lo0 - ox[j]) * r, (hi0 - ox[j]) * r));
+            r = 1.0f / uy;
+            leave = rs_minf(leave, rs_maxf((lo1 - oy[j]) * r, (hi1 - oy[j]) * r));
+            r = 1.0f / uz;
+            leave = rs_minf(leave, rs_maxf((lo2 - oz[j]) * r, (hi2 - oz[j]) * r));
+            t = tmax[j];
+            L = rs_keysort_pick(t >= L, L, rs_maxf(t, 0.0f));  /* also for NaN or negative tmax */
+            L = rs_minf(rs_maxf(leave * shrink, 0.0f), L);     /* the exit pulled in a little */
+            c3[j] = (ox[j] + L * ux - lo0) * sc0;
+            c4[j] = (oy[j] + L * uy - lo1) * sc1;
+            c5[j] = (oz[j] + L * uz - lo2) * sc2;
+        }
+    }
+    static void rs_keysort_end_points(const float *const o[3], const float *const d[3],
+                                      const float *tmax, const float *prev, int m, float *c,
+                                      int stride, const float *lo, const float *hi,
+                                      const float *scale, float length, float prev_scale,
+                                      float shrink)
+    {
+        /* two copies of the loop, so that neither tests prev per ray */
+        if (prev != NULL)
+            rs_keysort_end_points_loop(o[0], o[1], o[2], d[0], d[1], d[2], tmax, prev, 1, m,
+                                       c, c + stride, c + 2 * stride, c + 3 * stride,
+                                       c + 4 * stride, c + 5 * stride, lo, hi, scale,
+                                       length, prev_scale, shrink);
+        else
+            rs_keysort_end_points_loop(o[0], o[1], o[2], d[0], d[1], d[2], tmax, NULL, 0, m,
+                                       c, c + stride, c + 2 * stride, c + 3 * stride,
+                                       c + 4 * stride, c + 5 * stride, lo, hi, scale,
+                                       length, prev_scale, shrink);
+    }
     /* the highest and lowest set bit of a nonzero x */
     static inline int rs_keysort_clz64(uint64_t x)
     {
@@ -208,6 +287,12 @@ cdef extern from *:
     void quantise "rs_keysort_quantise"(const float *c, int32_t *q, int m) noexcept nogil
     int clz64 "rs_keysort_clz64"(uint64_t x) noexcept nogil
     int ctz64 "rs_keysort_ctz64"(uint64_t x) noexcept nogil
+    void end_points "rs_keysort_end_points"(const float *const *o, const float *const *d,
+                                            const float *tmax, const float *prev, int m,
+                                            float *c, int stride, const float *lo,
+                                            const float *hi, const float *scale,
+                                            float length, float prev_scale,
+                                            float shrink) noexcept nogil
     void scatter_pass "rs_keysort_scatter"(const uint64_t *src, uint64_t *dst, int32_t *out,
                                            int n, int shift, uint64_t dmask, int32_t *h,
                                            int32_t base, uint64_t low, int coherent) noexcept nogil
@@ -244,13 +329,12 @@ cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept
     """The coordinates of rays [b, b + m) (m <= BLOCK) into c[k * BLOCK + j].
 
     One simple loop per step, without branches, so the compiler vectorises
-    them; every ray gets the same IEEE operations in the same order whatever
-    the ISA, so keys are the same on every build."""
+    them (END_POINT: one loop in C, see rs_keysort_end_points); every ray gets
+    the same IEEE operations in the same order whatever the ISA, so keys are
+    the same on every build."""
     cdef int j, k
     cdef float inv[BLOCK]
-    cdef float ell[BLOCK]
-    cdef float leave[BLOCK]
-    cdef float u, v, s, below, L, p, t, r, lo, hi, scale
+    cdef float u, v, s, below, lo, scale
     # everything the loops read in locals: a store to c could alias *a, which would
     # keep the compiler from vectorising
     cdef const float *dx = a.d[0] + b
@@ -258,9 +342,16 @@ cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept
     cdef const float *dz = a.d[2] + b
     cdef const float *o
     cdef const float *d
-    cdef const float *tmax
-    cdef const float *prev
     cdef float *out
+    cdef const float *o_rows[3]
+    cdef const float *d_rows[3]
+    if a.mode == END_POINT:     # o + L d/|d|: in C (rs_keysort_end_points)
+        for k in range(3):
+            o_rows[k] = a.o[k] + b
+            d_rows[k] = a.d[k] + b
+        end_points(o_rows, d_rows, a.tmax + b, a.prev_t + b if a.prev_t != NULL else NULL,
+                   m, c, BLOCK, a.lo, a.hi, a.scale, a.length, a.prev_scale, EXIT_SHRINK)
+        return
     for k in range(3):
         o, out, lo, scale = a.o[k] + b, c + k * BLOCK, a.lo[k], a.scale[k]
         for j in range(m):
@@ -285,34 +376,6 @@ cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept
             d, out = a.d[k] + b, c + (3 + k) * BLOCK
             for j in range(m):
                 out[j] = HALF * (d[j] * inv[j]) + HALF
-        return
-    # END_POINT: o + L d/|d|, L the estimated length clamped to tmax and the box exit
-    L, scale = a.length, a.prev_scale
-    for j in range(m):
-        ell[j] = L
-    if a.prev_t != NULL:
-        prev = a.prev_t + b
-        for j in range(m):
-            p = prev[j]
-            ell[j] = pick((p > 0) & (p < INFINITY), p * scale, L)
-    # where the ray leaves the scene box (for an origin inside it), one axis per loop so
-    # that the divisions vectorise
-    for j in range(m):
-        leave[j] = INFINITY
-    for k in range(3):
-        o, d, lo, hi = a.o[k] + b, a.d[k] + b, a.lo[k], a.hi[k]
-        for j in range(m):
-            r = ONE / (d[j] * inv[j])
-            leave[j] = rs_minf(leave[j], rs_maxf((lo - o[j]) * r, (hi - o[j]) * r))
-    tmax = a.tmax + b
-    for j in range(m):
-        t = tmax[j]
-        L = pick(t >= ell[j], ell[j], rs_maxf(t, 0))   # also when tmax is NaN or negative
-        ell[j] = rs_minf(rs_maxf(leave[j] * EXIT_SHRINK, 0), L)   # the exit pulled in a little
-    for k in range(3):
-        o, d, out, lo, scale = a.o[k] + b, a.d[k] + b, c + (3 + k) * BLOCK, a.lo[k], a.scale[k]
-        for j in range(m):
-            out[j] = (o[j] + ell[j] * (d[j] * inv[j]) - lo) * scale
 
 
 cdef int used_bits(const uint64_t *row) noexcept nogil:

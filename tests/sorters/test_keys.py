@@ -176,6 +176,10 @@ def test_end_point_coordinates(prev, rng):
         prev_t[::5] = np.nan                    # unknown: the fixed length
         prev_t[1::7] = np.inf
         prev_t[2::9] = 0
+        prev_t[3::11] = -1.5                    # not a distance: the fixed length
+        prev_t[4::13] = -0.0
+        prev_t[5::17] = -np.inf
+        prev_t[6::19] = 1e-42                   # subnormal, positive: a known distance
     want = reference_coords(rays, BOX, "end_point", length=2.5, prev_t=prev_t, prev_scale=0.7)
     for k in range(6):
         got = quantised("end_point", rays, BOX, k, length=2.5, prev_t=prev_t, prev_scale=0.7)
@@ -431,6 +435,10 @@ def test_same_order_on_every_isa(name, rng):
 
     rays = inside_rays(rng, 3000)
     rays.prev_t = rng.uniform(0, 3, len(rays)).astype(np.float32)
+    rays.prev_t[::7] = np.nan
+    rays.prev_t[1::11] = -0.0
+    rays.prev_t[2::13] = 1e-42
+    rays.prev_t[3::17] = np.inf
     packets = np.array([0, 1024, 2048, 3000], np.int32)
     sorter = raysort.create("sorters", name)
     results = {}
