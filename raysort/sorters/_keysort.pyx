@@ -205,11 +205,11 @@ cdef extern from *:
      * One loop, its temporaries in registers (one loop per step kept them in memory),
      * with the same IEEE operations per ray as a scalar build. */
     static inline void rs_keysort_end_points_loop(
-        const float *restrict ox, const float *restrict oy, const float *restrict oz,
-        const float *restrict dx, const float *restrict dy, const float *restrict dz,
-        const float *restrict tmax, const float *restrict prev, int has_prev, int m,
-        float *restrict c0, float *restrict c1, float *restrict c2, float *restrict c3,
-        float *restrict c4, float *restrict c5, const float *lo, const float *hi,
+        const float *RS_RESTRICT ox, const float *RS_RESTRICT oy, const float *RS_RESTRICT oz,
+        const float *RS_RESTRICT dx, const float *RS_RESTRICT dy, const float *RS_RESTRICT dz,
+        const float *RS_RESTRICT tmax, const float *RS_RESTRICT prev, int has_prev, int m,
+        float *RS_RESTRICT c0, float *RS_RESTRICT c1, float *RS_RESTRICT c2, float *RS_RESTRICT c3,
+        float *RS_RESTRICT c4, float *RS_RESTRICT c5, const float *lo, const float *hi,
         const float *scale, float length, float prev_scale, float shrink)
     {
         const float lo0 = lo[0], lo1 = lo[1], lo2 = lo[2], hi0 = hi[0], hi1 = hi[1],
