@@ -147,9 +147,10 @@ def test_tiles_share_batches_at_low_spp():
             assert pipe._tile_groups(tiles, spp, join=False) == [[t] for t in tiles]
 
 
-def test_tiles_sharing_batches_give_the_same_image(sibenik):
-    """Partial tiles, several per batch or one: the same pixels bit for bit, and the
-    generator is asked for several tiles' passes at once."""
+@pytest.fixture
+def generated():
+    """The number of rays the generator ``recording_test`` (``pinhole``) is asked for,
+    call by call."""
     sizes = []
 
     class Recording(raysort.load("generators", "pinhole")):
@@ -159,22 +160,28 @@ def test_tiles_sharing_batches_give_the_same_image(sibenik):
 
     raysort.register("generators", "recording_test", Recording)
     try:
-        images = []
-        for batch_rays, threads in ((256, 1), (4096, 1), (4096, 2), (65536, 1)):
-            sizes.clear()
-            result = _render(sibenik, generator="recording_test", tile=16, size=(45, 37),
-                             spp=4, batch_rays=batch_rays, threads=threads)
-            images.append(result.image)
-            # 16x16 tiles at 4 spp: up to 1024 rays a tile; the 45x37 frame has 9 tiles
-            assert sum(sizes) == 45 * 37 * 4
-            if batch_rays == 256:       # one pass of one tile at a time
-                assert max(sizes) <= 256
-            elif batch_rays == 4096:    # runs of four tiles, all four passes
-                assert 1024 < max(sizes) <= 4096
-            else:                       # the whole frame in one batch
-                assert sizes == [45 * 37 * 4]
+        yield sizes
     finally:
         raysort.unregister("generators", "recording_test")
+
+
+def test_tiles_sharing_batches_give_the_same_image(sibenik, generated):
+    """Partial tiles, several per batch or one: the same pixels bit for bit, and the
+    generator is asked for several tiles' passes at once."""
+    images = []
+    for batch_rays, threads in ((256, 1), (4096, 1), (4096, 2), (65536, 1)):
+        generated.clear()
+        result = _render(sibenik, generator="recording_test", tile=16, size=(45, 37),
+                         spp=4, batch_rays=batch_rays, threads=threads)
+        images.append(result.image)
+        # 16x16 tiles at 4 spp: up to 1024 rays a tile; the 45x37 frame has 9 tiles
+        assert sum(generated) == 45 * 37 * 4
+        if batch_rays == 256:       # one pass of one tile at a time
+            assert max(generated) <= 256
+        elif batch_rays == 4096:    # runs of four tiles, all four passes
+            assert 1024 < max(generated) <= 4096
+        else:                       # the whole frame in one batch
+            assert generated == [45 * 37 * 4]
     for image in images[1:]:
         assert np.array_equal(image.view(np.uint32), images[0].view(np.uint32))
 
@@ -228,25 +235,14 @@ def test_stats_account_for_every_ray(sibenik):
     assert set(st.as_dict()) >= {"rays_per_depth", "counters_per_ray", "stage_seconds"}
 
 
-def test_memory_is_bounded_by_the_batch(sibenik):
+def test_memory_is_bounded_by_the_batch(sibenik, generated):
     """The generator is never asked for more than batch_rays rays at once
     (rounded up to one whole pass), whatever the image size x spp."""
-    sizes = []
-
-    class Recording(raysort.load("generators", "pinhole")):
-        def generate(self, camera, pixels, samples, width, height, spp, seed):
-            sizes.append(len(pixels) * len(samples))
-            return super().generate(camera, pixels, samples, width, height, spp, seed)
-
-    raysort.register("generators", "recording_test", Recording)
-    try:
-        pipe = raysort.Pipeline(sibenik, generator="recording_test", batch_rays=2048,
-                                shader={"type": "lambert", "max_depth": 0})
-        pipe.render(64, 64, spp=16)
-    finally:
-        raysort.unregister("generators", "recording_test")
-    assert max(sizes) == 2048
-    assert sum(sizes) == 64 * 64 * 16
+    pipe = raysort.Pipeline(sibenik, generator="recording_test", batch_rays=2048,
+                            shader={"type": "lambert", "max_depth": 0})
+    pipe.render(64, 64, spp=16)
+    assert max(generated) == 2048
+    assert sum(generated) == 64 * 64 * 16
 
 
 # --------------------------------------------------------------------------
