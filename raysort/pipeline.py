@@ -512,10 +512,6 @@ class Pipeline:
         per_group = max(1, self.batch_rays // (self.tile * self.tile * spp)) if join else 1
         return [tiles[i:i + per_group] for i in range(0, len(tiles), per_group)]
 
-    def _render_tile(self, tile, width, height, spp, seed, tap=None):
-        """``(radiance, stats)`` of one tile (see :meth:`_render_tiles`)."""
-        return self._render_tiles([tile], width, height, spp, seed, tap)[0][1]
-
     def _render_tiles(self, group, width, height, spp, seed, tap=None):
         """Render the tiles of ``group`` in shared batches: ``[(tile, (radiance, stats))]``,
         ``radiance`` the tile's float64 sum of samples (row-major pixels); the group's
