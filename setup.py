@@ -34,6 +34,8 @@ ISA_MODULES = [
     "_contract",
     "sorters.nah",
     "sorters._keysort",
+    "shaders.lambert",
+    "shaders.ao",
     "traversals.single",
     "traversals.masked",
     "traversals.ranged",

@@ -22,19 +22,33 @@ cdef extern from "raysort/gather.h" nogil:
 
 
 cdef enum:
-    UNWRITTEN = -2          # prim of a ray no lane was scattered to (see unwritten)
+    UNWRITTEN = -2          # prim of a ray no lane was scattered to (see scatter_each)
     UNWRITTEN_OCCLUDED = 2  # the same for an any-hit query's flags
 
 
-def offsets_valid(const int32_t[::1] offsets, int32_t n, int32_t max_packet=RS_MAX_PACKET):
-    """A sorter's ``offsets`` run from 0 to ``n`` in sub-packets of 1..max_packet rays
-    (what :func:`gather` needs before the packets are allocated)."""
+def sub_packets(const int32_t[::1] offsets, int32_t n, int32_t max_packet=RS_MAX_PACKET):
+    """``(counts, starts, lanes)`` of a sorter's ``offsets`` in one pass: sub-packet k's
+    rays, where it starts (as :func:`layout`) and the lanes they take; None if the
+    offsets do not run from 0 to ``n`` in sub-packets of 1..max_packet rays.  What :func:`raysort.rays.gather_checked` needs before
+    the packets are allocated."""
+    cdef Py_ssize_t k, m = offsets.shape[0] - 1
+    cdef int64_t lanes = 0
     cdef int bad
-    if offsets.shape[0] < 1:
-        return False
+    if m < 0:
+        return None
     with nogil:
-        bad = offsets_bad(&offsets[0], offsets.shape[0] - 1, n, max_packet)
-    return not bad
+        bad = offsets_bad(&offsets[0], m, n, max_packet)
+    if bad:
+        return None
+    counts = np.empty(m, dtype=np.int32)
+    starts = np.empty(m, dtype=np.int32)
+    cdef int32_t[::1] c = counts, st = starts
+    with nogil:
+        for k in range(m):
+            c[k] = offsets[k + 1] - offsets[k]
+            st[k] = <int32_t> lanes
+            lanes += (<int64_t> c[k] + 3) & ~3
+    return counts, starts, max(lanes, 4)
 
 
 def fixed_offsets(const int32_t[::1] packets, int32_t size):
@@ -119,7 +133,7 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
     sub-packet must hold rays of ``[0, n)`` from one large packet (``packets``: valid
     boundaries ending at n).  (That no ray comes twice is left to the scatter, which
     writes each ray once: see :func:`unwritten`.)  ``offsets`` must be valid
-    (:func:`offsets_valid`), ``len(order) == n``, and ``starts``/``dst``/... sized for
+    (:func:`sub_packets`), ``len(order) == n``, and ``starts``/``dst``/... sized for
     them.  With ``t0``, the row ``t`` as gathered (each ray's tmax) is written there too.
 
     Two passes: the order is laid out lane by lane into ``index`` (checked on the way),
@@ -240,23 +254,68 @@ def scatter_occluded(const int32_t[::1] prim, const int32_t[::1] index, unsigned
     return ok
 
 
-UNWRITTEN_PRIM, UNWRITTEN_FLAG = UNWRITTEN, UNWRITTEN_OCCLUDED     # for Python
-
-
-def unwritten(const int32_t[::1] prim, const uint8_t[::1] occluded):
-    """Whether a scatter left a ray unwritten: ``prim`` (closest hits, made full of
-    ``UNWRITTEN``) or ``occluded`` (any hits, full of ``UNWRITTEN``) still holds one.
-    Each of ``n`` lanes writes one ray, so a ray left out means another came twice."""
-    cdef Py_ssize_t i
-    cdef int left = 0
+def scatter_each(const float[:, ::1] rows, const int32_t[::1] prim, const float[::1] u,
+                 const float[::1] v, const int32_t[::1] index, Py_ssize_t n, bint any_hit):
+    """Every lane's hit to its ray ``index[lane]`` (-1: none), for lanes that hold each of
+    the ``n`` rays once: ``(out, fault)``, ``out`` a new float32 (4, n) block of the rows
+    t, prim (int32 bits), u, v, or with ``any_hit`` a uint8 (n,) array (1: occluded);
+    ``fault`` 0, ``1`` at a lane whose index is beyond ``n`` (nothing more written), or
+    ``2`` when a ray got no lane (so another came twice: a sorter's order that is no
+    permutation)."""
+    cdef Py_ssize_t s
+    cdef int32_t i
+    cdef int fault = 0, left = 0
+    cdef int32_t[::1] out_prim
+    cdef float[:, ::1] rows_out
+    cdef uint8_t[::1] flags
+    if n < 0 or prim.shape[0] != index.shape[0] or (not any_hit and (
+            rows.shape[0] != RS_PACKET_ROWS or rows.shape[1] != index.shape[0]
+            or u.shape[0] != index.shape[0] or v.shape[0] != index.shape[0])):
+        raise ValueError("scatter_each: rows, prim, u, v and index must hold one value per lane")
+    if any_hit:
+        out = np.empty(n, dtype=np.uint8)
+        flags = out
+        with nogil:
+            for s in range(n):
+                flags[s] = UNWRITTEN_OCCLUDED
+            for s in range(index.shape[0]):
+                i = index[s]
+                if i >= 0:
+                    if i >= n:
+                        fault = 1
+                        break
+                    flags[i] = prim[s] >= 0
+            if not fault:
+                for s in range(n):
+                    left |= flags[s] == UNWRITTEN_OCCLUDED
+        return out, fault or 2 * left
+    out = np.empty((4, n), dtype=np.float32)
+    rows_out = out
+    out_prim = out[1].view(np.int32)
     with nogil:
-        if occluded is None:
-            for i in range(prim.shape[0]):
-                left |= prim[i] == UNWRITTEN
-        else:
-            for i in range(occluded.shape[0]):
-                left |= occluded[i] == UNWRITTEN_OCCLUDED
-    return bool(left)
+        for s in range(n):
+            out_prim[s] = UNWRITTEN
+        for s in range(index.shape[0]):
+            i = index[s]
+            if i < 0:
+                continue
+            if i >= n:
+                fault = 1
+                break
+            if prim[s] >= 0:
+                rows_out[0, i] = rows[RS_PACKET_T, s]
+                out_prim[i] = prim[s]
+                rows_out[2, i] = u[s]
+                rows_out[3, i] = v[s]
+            else:
+                rows_out[0, i] = INFINITY
+                out_prim[i] = -1
+                rows_out[2, i] = 0
+                rows_out[3, i] = 0
+        if not fault:
+            for s in range(n):
+                left |= out_prim[s] == UNWRITTEN
+    return out, fault or 2 * left
 
 
 def add_unoccluded(double[:, ::1] radiance, const int32_t[::1] slot,

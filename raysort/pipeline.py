@@ -49,7 +49,9 @@ __all__ = ["Pipeline", "RenderResult", "RenderStats", "Traced", "STAGES", "morto
            "default_traversal"]
 
 #: stage names used in timings, in pipeline order ("check": the contract checks)
-STAGES = ("generate", "sort", "check", "gather", "traverse", "scatter", "shade")
+#: the stages a render's CPU time is split into; ``other`` is the bookkeeping between
+#: them (the batches' set-up, the counters' running totals, the tiles put into the image)
+STAGES = ("generate", "sort", "check", "gather", "traverse", "scatter", "shade", "other")
 #: most random-number seeds: the counter-based generator keys on 32 bits
 MAX_SEED = 2**32 - 1
 #: pixel indices are int32
@@ -80,7 +82,9 @@ class RenderStats:
     ``stage_seconds`` are the CPU seconds of each stage (thread CPU time, summed
     over worker threads, so a thread waiting for the GIL or a core costs nothing;
     ``shade`` includes the paths' bookkeeping after the shader: the next packets,
-    the paths taken, adding the unoccluded shadow rays);
+    the paths taken, adding the unoccluded shadow rays; ``other`` is the rest of
+    the render's CPU time: setting up batches, adding up counters, putting tiles
+    into the image), so together they are the whole CPU time of a render;
     ``wall_seconds`` is the elapsed time of the whole render.
     """
 
@@ -454,11 +458,16 @@ class Pipeline:
         progress = with_rays(progress, lambda: stats.total_rays)
 
         def finish(tile, result):
+            started = time.thread_time()
             radiance, tile_stats = result
             x0, y0 = tile
             w, h = min(self.tile, width - x0), min(self.tile, height - y0)
-            image[y0:y0 + h, x0:x0 + w] = (radiance / spp).reshape(h, w, 3).astype(np.float32)
-            stats.merge(tile_stats)
+            # the float64 mean rounded to float32, written in place
+            np.divide(radiance.reshape(h, w, 3), spp, out=image[y0:y0 + h, x0:x0 + w],
+                      casting="unsafe")
+            if tile_stats is not None:
+                stats.merge(tile_stats)
+            stats.stage_seconds["other"] += time.thread_time() - started
 
         if client is not None:
             from raysort import distributed
@@ -515,12 +524,13 @@ class Pipeline:
     def _render_tiles(self, group, width, height, spp, seed, tap=None):
         """Render the tiles of ``group`` in shared batches: ``[(tile, (radiance, stats))]``,
         ``radiance`` the tile's float64 sum of samples (row-major pixels); the group's
-        stats go with its first tile, the others get empty ones.
+        stats go with its first tile, the others get None.
 
         A batch holds, sample by sample, each tile's pass (one large packet); every
         pixel's rays, random numbers and additions to its radiance are the same, in the
         same order, as when its tile is rendered alone, so the image does not depend
         on the grouping."""
+        started = time.thread_time()
         starts, pixels, slots = [0], [], []
         for x0, y0 in group:
             w, h = min(self.tile, width - x0), min(self.tile, height - y0)
@@ -585,9 +595,12 @@ class Pipeline:
                 if depth > MAX_BOUNCES and len(rays):
                     raise contract.plugin_error("shaders", self.shader, f"shade() still returns "
                                                 f"rays after {MAX_BOUNCES} bounces")
+        # the call's CPU time that no stage took is the bookkeeping between them
+        seconds = stats.stage_seconds
+        seconds["other"] += max(0.0, time.thread_time() - started - sum(seconds.values()))
         if len(group) == 1:
             return [(tile, (radiance, stats))]
-        return [(t, (radiance[a:b], stats if i == 0 else RenderStats()))
+        return [(t, (radiance[a:b], stats if i == 0 else None))
                 for i, (t, a, b) in enumerate(zip(group, starts, [*starts[1:], n_pix]))]
 
     def _trace_shadows(self, shadow, packets, radiance, stats, tap=None, tile=None, depth=0):

@@ -280,14 +280,11 @@ class Hits:
         self.v = np.zeros(n, dtype=np.float32)
 
     @classmethod
-    def _to_scatter(cls, n, prim):
-        """Hits of ``n`` rays in one block, ``prim`` filled with ``prim`` and ``t``, ``u``,
-        ``v`` not initialised: for a scatter that writes every ray (or is discarded)."""
+    def _of_block(cls, block):
+        """Hits viewing a float32 (4, n) block of the rows t, prim (int32 bits), u, v."""
         hits = object.__new__(cls)
-        block = np.empty((4, n), dtype=np.float32)
         hits.t, hits.u, hits.v = block[0], block[2], block[3]
         hits.prim = block[1].view(np.int32)
-        hits.prim[:] = prim
         return hits
 
     def __len__(self):
@@ -320,9 +317,22 @@ class Packets:
     __slots__ = ("rows", "prim", "u", "v", "starts", "counts", "index", "_extra")
 
     def __init__(self, counts, _extra_rows=0):
-        self.counts = counts = np.ascontiguousarray(counts, dtype=np.int32)
-        self.starts = np.empty(len(counts), dtype=np.int32)
-        capacity = _row_lanes(isa.module("_gather").layout(counts, self.starts))
+        counts = np.ascontiguousarray(counts, dtype=np.int32)
+        starts = np.empty(len(counts), dtype=np.int32)
+        self._allocate(counts, starts, isa.module("_gather").layout(counts, starts),
+                       _extra_rows)
+
+    @classmethod
+    def _laid_out(cls, counts, starts, lanes, extra_rows=0):
+        """Packets of int32 ``counts`` already laid out (``starts``, ``lanes``: what
+        ``_gather.layout`` gives), rows not initialised."""
+        packets = object.__new__(cls)
+        packets._allocate(counts, starts, lanes, extra_rows)
+        return packets
+
+    def _allocate(self, counts, starts, lanes, _extra_rows):
+        self.counts, self.starts = counts, starts
+        capacity = _row_lanes(lanes)
         # one block: the packet rows, then prim, u, v, index (and the caller's extra rows)
         lane_bytes = capacity * 4
         rows, prim, u, v, index, *extra = _carve(len(PACKET_ROWS) * lane_bytes,
@@ -425,9 +435,10 @@ def gather_checked(rays, order, offsets, packets, keep_tmax=False, check_order=T
     invalid), or -1.
     """
     kernels = isa.module("_gather")
-    if len(order) != len(rays) or not kernels.offsets_valid(offsets, len(rays), max_packet):
+    layout = kernels.sub_packets(offsets, len(rays), max_packet)
+    if layout is None or len(order) != len(rays):
         return None, None, -1
-    batch = Packets(np.diff(offsets), _extra_rows=int(keep_tmax))
+    batch = Packets._laid_out(*layout, int(keep_tmax))
     tmax = batch._extra[0] if keep_tmax else None
     order_ok, bad_ray = kernels.gather(rays.data, order, offsets, batch.starts, batch.rows,
                                        batch.prim, batch.u, batch.v, batch.index, packets,
@@ -451,33 +462,19 @@ def scatter_occluded(packets, n):
     return occluded
 
 
-def _scatter(packets, n, any_hit, unwritten=False, hits=None):
+def _scatter(packets, n, any_hit, hits=None):
     """The hits (a :class:`Hits`, or a bool array with ``any_hit``) of ``packets``'s lanes
-    in batch order, and False if a lane's index lies beyond ``n``.  With ``unwritten``, a
-    ray no lane was scattered to keeps the gather's sentinel (see :func:`_unwritten`)."""
+    in batch order (a ray no lane holds: a miss), and False if a lane's index lies
+    beyond ``n``."""
     kernels = isa.module("_gather")
     if any_hit:
-        out = np.full(n, kernels.UNWRITTEN_FLAG if unwritten else 0, dtype=np.uint8)
+        out = np.zeros(n, dtype=np.uint8)
         ok = kernels.scatter_occluded(packets.prim, packets.index, out)
         return out.view(bool), ok
-    if hits is not None:
-        out = hits
-    elif unwritten:     # every ray is written, or the result is dropped as "order"
-        out = Hits._to_scatter(n, kernels.UNWRITTEN_PRIM)
-    else:
-        out = Hits(n)
+    out = Hits(n) if hits is None else hits
     ok = kernels.scatter(packets.rows, packets.prim, packets.u, packets.v, packets.index,
                          out.t, out.prim, out.u, out.v)
     return out, ok
-
-
-def _unwritten(out):
-    """Whether :func:`_scatter` with ``unwritten`` left a ray out (a sorter's order that
-    names some ray twice)."""
-    kernels = isa.module("_gather")
-    if isinstance(out, Hits):
-        return kernels.unwritten(out.prim, None)
-    return kernels.unwritten(None, out.view(np.uint8))
 
 
 def scatter_checked(packets, order, offsets, tmax, n_prim, any_hit, *, check_hits=True,
@@ -504,10 +501,15 @@ def scatter_checked(packets, order, offsets, tmax, n_prim, any_hit, *, check_hit
             code = 1
         if code:
             return None, "hits"
-    out, ok = _scatter(packets, n, any_hit, unwritten=check_order)
-    if not ok:                                  # an index beyond the batch
-        return None, "hits"
-    return (None, "order") if check_order and _unwritten(out) else (out, None)
+    if not check_order:
+        out, ok = _scatter(packets, n, any_hit)
+        return (out, None) if ok else (None, "hits")    # not ok: an index beyond the batch
+    # every ray written once, in one pass that finds a ray left out (another came twice)
+    out, fault = isa.module("_gather").scatter_each(packets.rows, packets.prim, packets.u,
+                                                    packets.v, packets.index, n, any_hit)
+    if fault:
+        return None, ("hits", "order")[fault - 1]
+    return (out.view(bool) if any_hit else Hits._of_block(out)), None
 
 
 def add_unoccluded(radiance, slot, contribution, occluded):

@@ -1,6 +1,8 @@
 """Work counters (the paper's Table I) and per-stage timings."""
 from __future__ import annotations
 
+import itertools
+import operator
 from dataclasses import dataclass, fields, replace
 
 __all__ = ["Counters", "COUNTER_LABELS"]
@@ -56,8 +58,9 @@ class Counters:
         object per render, not one per batch)."""
         if not isinstance(other, Counters):
             return NotImplemented
+        mine, theirs = self.__dict__, other.__dict__     # plain dataclass fields
         for name in WHOLE_NUMBERS:
-            setattr(self, name, getattr(self, name) + getattr(other, name))
+            mine[name] += theirs[name]
         if other.stream_level_rays:
             self.stream_level_rays = _add_levels(self.stream_level_rays,
                                                  other.stream_level_rays)
@@ -84,5 +87,6 @@ WHOLE_NUMBERS = tuple(f.name for f in fields(Counters)
 
 def _add_levels(a, b):
     """Entry-by-entry sum of two per-level tuples, the shorter padded with zeros."""
-    n = max(len(a), len(b))
-    return tuple((a[k] if k < len(a) else 0) + (b[k] if k < len(b) else 0) for k in range(n))
+    if len(a) == len(b):
+        return tuple(map(operator.add, a, b))
+    return tuple(x + y for x, y in itertools.zip_longest(a, b, fillvalue=0))

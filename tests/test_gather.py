@@ -266,3 +266,42 @@ def test_follow_paths_is_fancy_indexing_and_refuses_a_parent_out_of_range():
     for bad in (-1, n):
         with pytest.raises(IndexError, match="out of range"):
             follow_paths(np.array([0, bad], np.int32), pixel, sample, slot, t)
+
+
+@pytest.mark.parametrize("any_hit", [False, True])
+@pytest.mark.parametrize("n", [1, 7, 64, 1000])
+def test_checked_scatter_puts_each_lane_back_and_finds_a_ray_left_out(each_isa, n, any_hit):
+    """The pipeline's scatter of a sorter's order: every lane's hit at its ray (NumPy fancy
+    indexing of the lanes), ``"order"`` when a ray comes twice and another not at all,
+    ``"hits"`` at a lane naming a ray beyond the batch."""
+    rng = np.random.default_rng(n)
+    rays = random_rays(rng, n, BOX)
+    order = rng.permutation(n).astype(np.int32)
+    offsets = split(rng, n)
+    packets = np.array([0, n], np.int32)
+    batch, tmax, _ = gather_checked(rays, order, offsets, packets, keep_tmax=True)
+    lanes = np.flatnonzero(batch.index >= 0)
+    hit = lanes[rng.random(len(lanes)) < 0.5]
+    batch.prim[hit] = rng.integers(0, 100, len(hit))
+    batch.t[hit] = tmax[hit] / 2
+    batch.u[hit], batch.v[hit] = 0.25, 0.5
+    out, fault = scatter_checked(batch, order, offsets, tmax, 100, any_hit, check_hits=False)
+    assert fault is None
+    ray = batch.index[lanes]
+    if any_hit:
+        want = np.zeros(n, bool)
+        want[ray] = batch.prim[lanes] >= 0
+        assert out.dtype == bool and np.array_equal(out, want)
+    else:
+        hits = batch.prim[lanes] >= 0
+        assert np.array_equal(bits(out.t[ray]), bits(np.where(hits, batch.t[lanes], np.inf)))
+        assert np.array_equal(out.prim[ray], np.where(hits, batch.prim[lanes], -1))
+        assert np.array_equal(out.u[ray], np.where(hits, batch.u[lanes], 0))
+        assert np.array_equal(out.v[ray], np.where(hits, batch.v[lanes], 0))
+    if n > 1:
+        batch.index[lanes[1]] = batch.index[lanes[0]]      # a ray twice, another never
+        assert scatter_checked(batch, order, offsets, tmax, 100, any_hit,
+                               check_hits=False) == (None, "order")
+    batch.index[lanes[-1]] = n                              # beyond the batch
+    assert scatter_checked(batch, order, offsets, tmax, 100, any_hit,
+                           check_hits=False) == (None, "hits")

@@ -1,4 +1,6 @@
 """The render pipeline: analytic images, determinism, bounded memory, plugin contracts."""
+import time
+
 import numpy as np
 import pytest
 
@@ -233,6 +235,20 @@ def test_stats_account_for_every_ray(sibenik):
     assert st.total_rays == sum(st.rays.values()) + st.shadow_rays
     assert st.stage_seconds["traverse"] > 0 and st.wall_seconds > 0
     assert set(st.as_dict()) >= {"rays_per_depth", "counters_per_ray", "stage_seconds"}
+
+
+def test_stage_seconds_split_the_render_thread_cpu(sibenik):
+    """With one thread the stages are disjoint stretches of the calling thread's CPU time
+    that, with ``other`` (the bookkeeping between them), cover the render but for its
+    set-up: their sum is at most the render's thread CPU time and most of it."""
+    pipe = raysort.Pipeline(sibenik, threads=1)
+    pipe.render(8, 8, spp=1)                    # the BVH and the shader's tables
+    start = time.thread_time()
+    st = pipe.render(96, 64, spp=2, seed=3).stats
+    spent = time.thread_time() - start
+    assert set(st.stage_seconds) == set(raysort.pipeline.STAGES)
+    assert min(st.stage_seconds.values()) >= 0 and st.stage_seconds["other"] > 0
+    assert 0.5 * spent < sum(st.stage_seconds.values()) <= spent + 1e-6
 
 
 def test_memory_is_bounded_by_the_batch(sibenik, generated):

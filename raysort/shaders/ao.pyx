@@ -13,6 +13,7 @@ from raysort.shaders._shading cimport (LANES, HitBlock, add_hit, leave_surfaces,
 
 import numpy as np
 
+from raysort import isa
 from raysort.params import integer, number
 from raysort.paths import Bounce, ShadowRays
 from raysort.plugin import Shader
@@ -139,7 +140,7 @@ class AOShader(Shader):
         ao_parent = np.empty(m_max, dtype=np.int32)
         ao_slot = np.empty(m_max, dtype=np.int32)
         ao_weight = np.empty((3, m_max), dtype=np.float32)
-        m = _ao(rays.data, hits.t, hits.prim, normals, paths.pixel, paths.sample, paths.slot,
+        m = isa.module("shaders.ao")._ao(rays.data, hits.t, hits.prim, normals, paths.pixel, paths.sample, paths.slot,
                 paths.throughput, self.samples, distance, self.background, seed & 0xFFFFFFFF,
                 radiance, ao_rays.data, ao_parent, ao_slot, ao_weight)
         shadow = None

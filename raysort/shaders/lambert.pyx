@@ -8,6 +8,7 @@ from raysort.shaders._shading cimport (LANES, HitBlock, add_hit, leave_surfaces,
 
 import numpy as np
 
+from raysort import isa
 from raysort.params import boolean, integer
 from raysort.paths import Bounce, ShadowRays
 from raysort.plugin import Shader
@@ -283,7 +284,7 @@ class LambertShader(Shader):
         sh_parent = np.empty(m_max, dtype=np.int32)
         sh_slot = np.empty(m_max, dtype=np.int32)
         sh_contrib = np.empty((3, m_max), dtype=np.float32)
-        k, m = _shade(rays.data, hits.t, hits.prim, faces, emitters, scene.sky, paths.pixel,
+        k, m = isa.module("shaders.lambert")._shade(rays.data, hits.t, hits.prim, faces, emitters, scene.sky, paths.pixel,
                       paths.sample, paths.slot, paths.throughput, depth, self.max_depth,
                       seed & 0xFFFFFFFF, self.russian_roulette, self.rr_depth, light_pos, light_int,
                       radiance, next_rays.data, next_parent, next_thr, sh_rays.data,

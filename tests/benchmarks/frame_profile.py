@@ -5,9 +5,10 @@ traversal of :func:`raysort.pipeline.default_traversal`, ``lambert``) and report
 the render's own per-stage thread-CPU timers (``RenderStats.stage_seconds``), each
 stage's median over ``--stage-rounds`` frames (after a small warm-up frame, which builds
 the trees the traversal reads), its share of the frame's CPU and the framework's share
-(every stage but ``traverse``: shade, check, gather, sort, generate, scatter), also
-with the shader's ``prepare`` counted (CPU of every frame, but outside the stage
-timers; timed on its own, the median of three calls).  Then it
+(every stage but ``traverse``: shade, check, gather, sort, generate, scatter and
+``other``, the bookkeeping between them), also with the shader's ``prepare`` counted
+(CPU of every frame, but outside the stage timers; timed on its own, the median of
+three calls), and how much of the render's thread CPU the stages hold.  Then it
 times whole frames with 1 and 2 threads, interleaved in one process (a warm-up round,
 the order rotated every round) and prints medians with their spread and the per-round
 speed-up.  Images are compared bit for bit.
@@ -44,6 +45,13 @@ def render(pipe, args):
     start = time.perf_counter()
     result = pipe.render(args.size, args.size, spp=args.spp, seed=1)
     return result, time.perf_counter() - start
+
+
+def cpu_render(pipe, args):
+    """A render with its calling thread's CPU seconds (with one thread: the frame's)."""
+    start = time.thread_time()
+    result, wall = render(pipe, args)
+    return result, wall, time.thread_time() - start
 
 
 def prepare_seconds(pipe, rounds=3):
@@ -97,11 +105,14 @@ def main(argv=None):
     print(f"machine: {cpu_name()} ({os.cpu_count()} cores), ISA {isa.active()}, "
           f"load average before: {load}")
 
-    runs = [render(pipes[1], args) for _ in range(max(1, args.stage_rounds))]
+    runs = [cpu_render(pipes[1], args) for _ in range(max(1, args.stage_rounds))]
     result = runs[0][0]
-    print(f"\none thread: {statistics.median(s for _, s in runs):.2f} s wall (median), "
+    print(f"\none thread: {statistics.median(s for _, s, _ in runs):.2f} s wall (median), "
           f"{result.stats.total_rays:,} rays")
-    stage_table([res.stats for res, _ in runs], prepare_seconds(pipes[1]))
+    stage_table([res.stats for res, _, _ in runs], prepare_seconds(pipes[1]))
+    covered = [sum(res.stats.stage_seconds.values()) / cpu for res, _, cpu in runs]
+    print(f"  the stages hold {statistics.median(covered):.1%} of the render's thread CPU "
+          f"(median; the rest: the shader's prepare, the render's set-up)")
     if args.no_threads:
         return
 
