@@ -321,9 +321,13 @@ def scatter_each(const float[:, ::1] rows, const int32_t[::1] prim, const float[
 def add_unoccluded(double[:, ::1] radiance, const int32_t[::1] slot,
                    const float[:, :] contribution, const unsigned char[::1] occluded):
     """``radiance[slot[i]] += contribution[:, i]`` for every ray i not occluded, in order
-    (what ``np.add.at`` does, without its per-element overhead)."""
+    (what ``np.add.at`` does, without its per-element overhead).  An occluded ray adds
+    -0.0, which leaves every float as it is (even -0.0), so the loop has no branch for
+    a test that goes either way at random."""
     cdef Py_ssize_t i, n = slot.shape[0]
     cdef int c
+    cdef bint lit
+    cdef double *row
     if contribution.shape[0] != 3 or contribution.shape[1] != n or occluded.shape[0] != n \
             or radiance.shape[1] != 3:
         raise ValueError("add_unoccluded: radiance (k, 3), slot (n,), contribution (3, n) and "
@@ -333,9 +337,10 @@ def add_unoccluded(double[:, ::1] radiance, const int32_t[::1] slot,
             raise IndexError(f"add_unoccluded: slot[{i}] = {slot[i]} is out of range")
     with nogil:
         for i in range(n):
-            if not occluded[i]:
-                for c in range(3):
-                    radiance[slot[i], c] += contribution[c, i]
+            lit = occluded[i] == 0
+            row = &radiance[slot[i], 0]
+            for c in range(3):
+                row[c] += contribution[c, i] if lit else -0.0
 
 
 def compiled_isa():

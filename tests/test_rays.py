@@ -439,13 +439,15 @@ def test_scatter_occluded(gathered):
 # -- shadow-ray radiance --------------------------------------------------------------
 
 def test_add_unoccluded_is_np_add_at():
-    """The same float64 sums as ``np.add.at`` (same order, repeated slots included)."""
+    """The same float64 sums as ``np.add.at`` (same order, repeated slots included), bit for
+    bit, whatever sums it starts from."""
     rng = np.random.default_rng(5)
     m, slots = 5000, 37
     slot = rng.integers(0, slots, m).astype(np.int32)
     contribution = rng.random((3, 2 * m), dtype=np.float32)[:, :m]      # strided, as shaders
     occluded = rng.random(m) < 0.3
     start = rng.random((slots, 3))
+    start[:4, 0] = -0.0, np.inf, -np.inf, np.nan     # an occluded ray leaves even these alone
     want = start.copy()
     np.add.at(want, slot[~occluded], contribution[:, ~occluded].T)
     got = start.copy()
