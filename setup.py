@@ -43,6 +43,7 @@ ISA_MODULES = [
     "traversals.wide16",
     "traversals.stream",
     "traversals.frustum",
+    "generators.pinhole",
 ]
 
 
