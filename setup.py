@@ -45,6 +45,7 @@ ISA_MODULES = [
     "traversals.wide16",
     "traversals.stream",
     "traversals.frustum",
+    "generators.pinhole",
 ]
 
 

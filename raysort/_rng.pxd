@@ -7,7 +7,8 @@ hash (Chris Wellons); ``uniform`` maps its top 24 bits to [0, 1).
 The hash is a chain, ``mix32(mix32(mix32(mix32(seed') ^ pixel) ^ sample) ^ dim)``,
 so the numbers of one path share a prefix: ``path_key(seed, pixel, sample)`` hashes
 it once and ``uniform_at(key, dim)`` draws each dimension with one more ``mix32``;
-``uniform(seed, pixel, sample, dim)`` is the same number in one call.
+``uniform(seed, pixel, sample, dim)`` is the same number in one call.  The samples
+of one pixel share the shorter prefix ``pixel_key(seed_key(seed), pixel)``.
 """
 from libc.stdint cimport int32_t, uint32_t
 
@@ -26,9 +27,14 @@ cdef inline uint32_t seed_key(uint32_t seed) noexcept nogil:
     return mix32(seed ^ 0x9e3779b9u)
 
 
+cdef inline uint32_t pixel_key(uint32_t seed_k, uint32_t pixel) noexcept nogil:
+    """The hash prefix of one pixel, from ``seed_key(seed)`` (shared by its samples)."""
+    return mix32(seed_k ^ pixel)
+
+
 cdef inline uint32_t sample_key(uint32_t seed_k, uint32_t pixel, uint32_t sample) noexcept nogil:
     """The hash prefix of one (pixel, sample), from ``seed_key(seed)``."""
-    return mix32(mix32(seed_k ^ pixel) ^ sample)
+    return mix32(pixel_key(seed_k, pixel) ^ sample)
 
 
 cdef inline uint32_t path_key(uint32_t seed, uint32_t pixel, uint32_t sample) noexcept nogil:

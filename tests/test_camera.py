@@ -1,7 +1,8 @@
 """The pinhole camera (frame, validation) and the ``pinhole`` generator's rays.
 
 References are recomputed here in float64 from the camera's definition
-(eye, look_at, up, vfov), not taken from the code under test.
+(eye, look_at, up, vfov), not taken from the code under test; only the bit-for-bit
+check of the generator's arithmetic starts from ``Camera.frame`` (its float32 input).
 """
 import math
 
@@ -10,6 +11,7 @@ import pytest
 
 import raysort
 from raysort import Camera
+from raysort._layout import RNG_DIMS
 from raysort.errors import ConfigError
 
 CAMERAS = [
@@ -332,6 +334,67 @@ def test_unjittered_strata_centres():
     for s in range(4):
         ref = pixel_directions(CAM, w, h, jx=(s % 2 + 0.5) / 2, jy=(s // 2 + 0.5) / 2)
         np.testing.assert_allclose(got[s * len(pixels):(s + 1) * len(pixels)], ref, atol=1e-6)
+
+
+def _mix32(x):
+    """``mix32`` of raysort/_rng.pxd on a uint32 array (products wrap as in C)."""
+    x = x ^ (x >> 16)
+    x = x * np.uint32(0x7FEB352D)
+    x = x ^ (x >> 15)
+    x = x * np.uint32(0x846CA68B)
+    return x ^ (x >> 16)
+
+
+def _uniform(key, dim):
+    """``uniform_at``: the hash's top 24 bits times 2^-24, in float32 (exact)."""
+    return (_mix32(key ^ np.uint32(dim)) >> 8).astype(np.float32) * np.float32(2.0 ** -24)
+
+
+def reference_rays(cam, pixels, samples, w, h, spp, seed, jitter):
+    """The generator's rays, (8, n) in RayBatch row order, from its formula in NumPy with
+    the kernel's types, in its order: float32 jitter, the image-plane position in float64
+    rounded to float32, a float32 direction, its norm as the float64 square root of a
+    float32 sum, rounded to float32."""
+    eye, fwd, right, up = cam.frame(w, h)
+    root = math.isqrt(spp)
+    strata = root if root * root == spp else 1
+    pix = np.tile(np.asarray(pixels, np.int32), len(samples))     # pass major
+    smp = np.repeat(np.asarray(samples, np.int32), len(pixels))
+    stratum = smp % (strata * strata)
+    if jitter:
+        seed_k = _mix32(np.array([seed & 0xFFFFFFFF], np.uint32) ^ np.uint32(0x9E3779B9))
+        key = _mix32(_mix32(seed_k ^ pix.astype(np.uint32)) ^ smp.astype(np.uint32))
+        jx, jy = _uniform(key, RNG_DIMS["jitter_x"]), _uniform(key, RNG_DIMS["jitter_y"])
+    else:
+        jx = jy = np.full(len(pix), 0.5, np.float32)
+    jx = ((stratum % strata).astype(np.float32) + jx) / np.float32(strata)
+    jy = ((stratum // strata).astype(np.float32) + jy) / np.float32(strata)
+    x, y = (pix % w).astype(np.float32), (pix // w).astype(np.float32)
+    sx = (2.0 * (x + jx).astype(np.float64) / w - 1.0).astype(np.float32)
+    sy = (1.0 - 2.0 * (y + jy).astype(np.float64) / h).astype(np.float32)
+    d = fwd[:, None] + sx * right[:, None] + sy * up[:, None]
+    norm = np.sqrt((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).astype(np.float64))
+    n = len(pix)
+    return np.vstack([np.broadcast_to(eye[:, None], (3, n)), d / norm.astype(np.float32),
+                      np.zeros((1, n), np.float32), np.full((1, n), np.inf, np.float32)])
+
+
+@pytest.mark.parametrize("jitter", [True, False])
+def test_rays_match_the_formula_bit_for_bit_on_every_isa(each_isa, jitter):
+    """Every ISA's build of the kernel (vectorised as the compiler likes) gives the
+    formula's bits, for square and other spp, scattered pixels, repeated samples and
+    samples beyond spp."""
+    rng = np.random.default_rng(17)
+    for cam, (w, h) in [(CAM, (37, 23)), (CAMERAS[1], (64, 48)), (CAMERAS[3], (17, 31))]:
+        for spp in (1, 4, 5, 16):
+            pixels = np.concatenate([rng.permutation(w * h)[:300], rng.integers(0, w * h, 5)])
+            samples = [spp - 1, 0, spp - 1, spp + 1, 2]
+            for seed in (0, 2 ** 32 - 1, 2 ** 40 + 5):
+                rays = _generate(_gen(jitter=jitter), pixels, samples, w, h, spp, seed, cam)
+                ref = reference_rays(cam, pixels, samples, w, h, spp, seed, jitter)
+                assert rays.data.dtype == ref.dtype == np.float32
+                got = rays.data[:, :len(rays)].view(np.uint32)
+                assert np.array_equal(got, ref.view(np.uint32)), (each_isa, cam, spp, seed)
 
 
 @pytest.mark.parametrize("jitter", [1, "yes", None])

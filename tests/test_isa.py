@@ -44,7 +44,7 @@ def test_info_names_compiled_and_active():
 def test_use_switches_the_kernel_modules(each_isa):
     assert isa.active() == each_isa
     assert isa.module("_gather").compiled_isa() == each_isa
-    for name in ("traversals.single", "traversals.wide", "sorters.nah"):
+    for name in ("traversals.single", "traversals.wide", "sorters.nah", "generators.pinhole"):
         mod = isa.module(name)
         expected = f"raysort.{name}" if each_isa == isa.baseline() else \
             f"raysort._isa.{each_isa}.{name}"
