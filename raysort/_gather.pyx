@@ -77,6 +77,27 @@ def fixed_offsets(const int32_t[::1] packets, int32_t size):
     return out
 
 
+def sample_paths(const int32_t[::1] pixels, const int32_t[::1] slots,
+                 const int32_t[::1] samples):
+    """``(pixel, sample, slot)`` of the paths of a batch that holds, sample by sample, a
+    pass over ``pixels`` (each with its accumulator row in ``slots``): ``np.tile(pixels,
+    k)``, ``np.repeat(samples, n)`` and ``np.tile(slots, k)`` in one pass."""
+    cdef Py_ssize_t n = pixels.shape[0], k = samples.shape[0], s, p
+    if slots.shape[0] != n:
+        raise ValueError("sample_paths: one slot per pixel")
+    pixel = np.empty(k * n, dtype=np.int32)
+    sample = np.empty(k * n, dtype=np.int32)
+    slot = np.empty(k * n, dtype=np.int32)
+    cdef int32_t[::1] o_pixel = pixel, o_sample = sample, o_slot = slot
+    with nogil:
+        for s in range(k):
+            for p in range(n):
+                o_pixel[s * n + p] = pixels[p]
+                o_sample[s * n + p] = samples[s]
+                o_slot[s * n + p] = slots[p]
+    return pixel, sample, slot
+
+
 def follow_paths(const int32_t[::1] parent, const int32_t[::1] pixel,
                  const int32_t[::1] sample, const int32_t[::1] slot, const float[::1] t):
     """``(pixel, sample, slot, t)`` of the rays ``parent`` (each an index into the four

@@ -36,6 +36,7 @@ import numpy as np
 
 from raysort import contract, isa, registry
 from raysort._gather import follow_paths as _follow_paths
+from raysort._gather import sample_paths as _sample_paths
 from raysort.bvh import BVH
 from raysort.errors import ConfigError
 from raysort.params import boolean, integer
@@ -73,6 +74,16 @@ def morton_order(width, height):
     order = np.argsort(code, kind="stable").astype(np.int32)
     order.setflags(write=False)
     return order
+
+
+@functools.lru_cache(maxsize=16)
+def _tile_pixels(width, height, image_width):
+    """The pixel indices of a tile at the image's origin, in :func:`morton_order` (add the
+    index of the tile's corner for the others; read-only, made once per tile shape)."""
+    local = morton_order(width, height)
+    pixels = (local // width * image_width + local % width).astype(np.int32)
+    pixels.setflags(write=False)
+    return pixels
 
 
 @dataclass
@@ -534,9 +545,9 @@ class Pipeline:
         starts, pixels, slots = [0], [], []
         for x0, y0 in group:
             w, h = min(self.tile, width - x0), min(self.tile, height - y0)
-            local = morton_order(w, h)
-            pixels.append(((y0 + local // w) * width + x0 + local % w).astype(np.int32))
-            slots.append(local + starts[-1])   # accumulator row: the tile's, then row-major
+            pixels.append(_tile_pixels(w, h, width) + np.int32(y0 * width + x0))
+            # accumulator rows: the tile's pixels after the tiles before it, row-major
+            slots.append(morton_order(w, h) + np.int32(starts[-1]))
             starts.append(starts[-1] + w * h)
         pixels = np.concatenate(pixels) if len(group) > 1 else pixels[0]
         slots = np.concatenate(slots) if len(group) > 1 else slots[0]
@@ -558,8 +569,7 @@ class Pipeline:
                 contract.check_generated(self.generator, rays, n_pix * len(samples),
                                          with_rays=False)     # the gather checks them
                 clock.lap("check")
-            paths = Paths(np.tile(pixels, len(samples)), np.repeat(samples, n_pix),
-                          np.tile(slots, len(samples)))
+            paths = Paths(*_sample_paths(pixels, slots, samples))
             packets = np.append((np.arange(0, len(rays), n_pix, dtype=np.int32)[:, None]
                                  + starts).ravel(), np.int32(len(rays)))
             depth, maker = 0, ("generators", self.generator, "generate() result")

@@ -248,6 +248,23 @@ def test_a_new_ray_batch_starts_clean_in_recycled_memory():
     assert (held.data == 7.0).all()
 
 
+@pytest.mark.parametrize("n, k", [(0, 3), (1, 1), (5, 0), (1024, 4), (37, 16)])
+def test_sample_paths_is_tile_and_repeat(n, k):
+    """The paths of a batch of k passes over n pixels: ``np.tile`` and ``np.repeat``."""
+    from raysort._gather import sample_paths
+
+    rng = np.random.default_rng(n + k)
+    pixels, slots = (rng.integers(-5, 1 << 30, n).astype(np.int32) for _ in range(2))
+    samples = rng.integers(0, 100, k).astype(np.int32)
+    pixel, sample, slot = sample_paths(pixels, slots, samples)
+    assert pixel.dtype == sample.dtype == slot.dtype == np.int32
+    assert np.array_equal(pixel, np.tile(pixels, k))
+    assert np.array_equal(sample, np.repeat(samples, n))
+    assert np.array_equal(slot, np.tile(slots, k))
+    with pytest.raises(ValueError, match="one slot per pixel"):
+        sample_paths(pixels, slots[:-1] if n else np.zeros(1, np.int32), samples)
+
+
 def test_follow_paths_is_fancy_indexing_and_refuses_a_parent_out_of_range():
     """The paths' bookkeeping after a shade: pixel, sample, slot and t of each parent,
     as NumPy's indexing gives them; a parent out of range is an IndexError."""
