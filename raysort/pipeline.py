@@ -57,6 +57,9 @@ STAGES = ("generate", "sort", "check", "gather", "traverse", "scatter", "shade",
 MAX_SEED = 2**32 - 1
 #: pixel indices are int32
 MAX_PIXELS = 2**31 - 1
+#: a frame's tiles make at least this many runs that share batches (while there are
+#: tiles enough), whatever ``batch_rays`` (``Pipeline._tile_groups``)
+MIN_RUNS = 16
 #: a path still bouncing after this many bounces means a shader that never ends its paths
 MAX_BOUNCES = 1024
 _BVH_PARAMETERS = tuple(p.name for p in inspect.signature(BVH).parameters.values()
@@ -269,8 +272,9 @@ class Pipeline:
         tile edge in pixels; one sample pass over a tile is a large packet.
     threads : int, default 1
         worker threads (tiles are shared out; the image does not change).
-    batch_rays : int, default 16384
-        about how many rays a worker keeps in flight (memory bound).
+    batch_rays : int, default 65536
+        about how many rays a worker keeps in flight (memory bound); fewer when a
+        frame's tiles would otherwise make fewer than ``MIN_RUNS`` runs of tiles.
     check_plugins : bool, default True
         check every plugin result against its contract (:mod:`raysort.contract`);
         False skips the checks for raysort's own plugins marked trusted (plugins
@@ -282,7 +286,7 @@ class Pipeline:
     """
 
     def __init__(self, scene=None, *, generator="pinhole", sorter="none", traversal=None,
-                 shader="lambert", tile=32, threads=1, batch_rays=16384, check_plugins=True,
+                 shader="lambert", tile=32, threads=1, batch_rays=65536, check_plugins=True,
                  bvh=None):
         if not (scene is None or isinstance(scene, (Scene, str, os.PathLike))):
             raise ConfigError(f"scene must be a Scene, a packaged scene name or a path to a "
@@ -525,11 +529,14 @@ class Pipeline:
         """``tiles`` in runs that share batches: at low spp one tile's passes make a
         small batch (the default 32x32 tiles at 4 spp: 4,096 rays), and every batch
         costs the same Python calls between the kernels, which hold the GIL; so as
-        many tiles as their passes fill ``batch_rays`` are rendered together.  The
-        runs depend only on the frame and the pipeline, never on threads or workers
-        (the traversal's counters depend on the batches).  ``join`` False: one tile
-        per run (a ``tap`` sees one tile per record)."""
-        per_group = max(1, self.batch_rays // (self.tile * self.tile * spp)) if join else 1
+        many tiles as their passes fill ``batch_rays`` are rendered together, but no
+        more than leave ``MIN_RUNS`` runs, so that threads and Dask workers share a
+        small frame.  The runs depend only on the frame and the pipeline, never on
+        threads or workers (the traversal's counters depend on the batches).  ``join``
+        False: one tile per run (a ``tap`` sees one tile per record)."""
+        per_group = min(self.batch_rays // (self.tile * self.tile * spp),
+                        -(-len(tiles) // MIN_RUNS))
+        per_group = max(1, per_group) if join else 1
         return [tiles[i:i + per_group] for i in range(0, len(tiles), per_group)]
 
     def _render_tiles(self, group, width, height, spp, seed, tap=None):

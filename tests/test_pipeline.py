@@ -135,11 +135,13 @@ def test_thread_count_does_not_change_the_image(sibenik, sibenik_reference):
 
 
 def test_tiles_share_batches_at_low_spp():
-    """As many whole tiles as fill batch_rays share a batch; never fewer than one; the
-    runs do not depend on the thread count; with a tap, one tile per run."""
+    """As many whole tiles as fill batch_rays share a batch, but no more than leave
+    MIN_RUNS runs; never fewer than one; the runs do not depend on the thread count;
+    with a tap, one tile per run."""
+    assert raysort.pipeline.MIN_RUNS == 16
     tiles = [(x, y) for y in range(0, 96, 16) for x in range(0, 80, 16)]     # 30 tiles
-    for spp, batch_rays, per_run in ((1, 16384, 30), (4, 16384, 16), (4, 2048, 2),
-                                     (16, 2048, 1), (64, 256, 1)):
+    for spp, batch_rays, per_run in ((1, 16384, 2), (4, 16384, 2), (4, 2048, 2),
+                                     (16, 2048, 1), (64, 256, 1), (1, 512, 2), (1, 256, 1)):
         for threads in (1, 2):
             pipe = raysort.Pipeline("plane", tile=16, batch_rays=batch_rays, threads=threads)
             runs = pipe._tile_groups(tiles, spp)
@@ -147,6 +149,10 @@ def test_tiles_share_batches_at_low_spp():
             assert [len(run) for run in runs[:-1]] == [per_run] * (len(runs) - 1)
             assert 1 <= len(runs[-1]) <= per_run
             assert pipe._tile_groups(tiles, spp, join=False) == [[t] for t in tiles]
+    many = [(x, 0) for x in range(0, 16 * 400, 16)]                          # 400 tiles
+    pipe = raysort.Pipeline("plane", tile=16, batch_rays=16384)
+    assert {len(run) for run in pipe._tile_groups(many, 4)} == {16}          # batch_rays
+    assert {len(run) for run in pipe._tile_groups(many, 1)} == {25}          # MIN_RUNS
 
 
 @pytest.fixture
@@ -171,19 +177,18 @@ def test_tiles_sharing_batches_give_the_same_image(sibenik, generated):
     """Partial tiles, several per batch or one: the same pixels bit for bit, and the
     generator is asked for several tiles' passes at once."""
     images = []
-    for batch_rays, threads in ((256, 1), (4096, 1), (4096, 2), (65536, 1)):
+    for batch_rays, threads in ((64, 1), (512, 1), (512, 2), (65536, 1)):
         generated.clear()
-        result = _render(sibenik, generator="recording_test", tile=16, size=(45, 37),
+        result = _render(sibenik, generator="recording_test", tile=8, size=(45, 37),
                          spp=4, batch_rays=batch_rays, threads=threads)
         images.append(result.image)
-        # 16x16 tiles at 4 spp: up to 1024 rays a tile; the 45x37 frame has 9 tiles
+        # 8x8 tiles at 4 spp: up to 256 rays a tile; the 45x37 frame has 30 tiles, so
+        # MIN_RUNS (16) lets at most two share a batch
         assert sum(generated) == 45 * 37 * 4
-        if batch_rays == 256:       # one pass of one tile at a time
-            assert max(generated) <= 256
-        elif batch_rays == 4096:    # runs of four tiles, all four passes
-            assert 1024 < max(generated) <= 4096
-        else:                       # the whole frame in one batch
-            assert generated == [45 * 37 * 4]
+        if batch_rays == 64:        # one pass of one tile at a time
+            assert max(generated) <= 64
+        else:                       # runs of two tiles, all four passes
+            assert max(generated) == 2 * 256
     for image in images[1:]:
         assert np.array_equal(image.view(np.uint32), images[0].view(np.uint32))
 
