@@ -29,8 +29,8 @@ cdef enum:
 def sub_packets(const int32_t[::1] offsets, int32_t n, int32_t max_packet=RS_MAX_PACKET):
     """``(counts, starts, lanes)`` of a sorter's ``offsets`` in one pass: sub-packet k's
     rays, where it starts (as :func:`layout`) and the lanes they take; None if the
-    offsets do not run from 0 to ``n`` in sub-packets of 1..max_packet rays.  What :func:`raysort.rays.gather_checked` needs before
-    the packets are allocated."""
+    offsets do not run from 0 to ``n`` in sub-packets of 1..max_packet rays.  What
+    :func:`raysort.rays.gather_checked` needs before the packets are allocated."""
     cdef Py_ssize_t k, m = offsets.shape[0] - 1
     cdef int64_t lanes = 0
     cdef int bad

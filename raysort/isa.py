@@ -3,12 +3,12 @@
 The kernel modules (traversals, the sorters' kernels, gather, the ``pinhole``
 generator, the ``lambert`` and ``ao`` shaders; setup.py's ``ISA_MODULES``) are
 compiled from the same source once per ISA: ``scalar`` (the portable C path of
-``simd.h``), ``sse2`` (the baseline build on x86-64), ``avx2`` and ``avx512``.  At first use raysort picks the best
-ISA that is both compiled and supported by this CPU, as Embree and NumPy do;
-every ISA performs the same IEEE operations per lane (no FMA contraction), so
-hits and images are bit-identical whichever runs.
-``RAYSORT_ISA=scalar|sse2|avx2|avx512`` forces one; asking for an ISA that is
-not compiled or not supported is a ConfigError.
+``simd.h``), ``sse2`` (the baseline build on x86-64), ``avx2`` and ``avx512``.
+At first use raysort picks the best ISA that is both compiled and supported by
+this CPU, as Embree and NumPy do; every ISA performs the same IEEE operations
+per lane (no FMA contraction), so hits and images are bit-identical whichever
+runs.  ``RAYSORT_ISA=scalar|sse2|avx2|avx512`` forces one; asking for an ISA
+that is not compiled or not supported is a ConfigError.
 
 Framework code and plugins call a kernel through :func:`module`::
 

@@ -140,9 +140,10 @@ class AOShader(Shader):
         ao_parent = np.empty(m_max, dtype=np.int32)
         ao_slot = np.empty(m_max, dtype=np.int32)
         ao_weight = np.empty((3, m_max), dtype=np.float32)
-        m = isa.module("shaders.ao")._ao(rays.data, hits.t, hits.prim, normals, paths.pixel, paths.sample, paths.slot,
-                paths.throughput, self.samples, distance, self.background, seed & 0xFFFFFFFF,
-                radiance, ao_rays.data, ao_parent, ao_slot, ao_weight)
+        m = isa.module("shaders.ao")._ao(
+            rays.data, hits.t, hits.prim, normals, paths.pixel, paths.sample, paths.slot,
+            paths.throughput, self.samples, distance, self.background, seed & 0xFFFFFFFF,
+            radiance, ao_rays.data, ao_parent, ao_slot, ao_weight)
         shadow = None
         if m:
             shadow = ShadowRays(ao_rays.truncate(m), ao_parent[:m], ao_slot[:m],

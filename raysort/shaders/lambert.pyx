@@ -1,5 +1,6 @@
 """``lambert``: a Lambertian path tracer (cosine-weighted diffuse bounces)."""
 from libc.math cimport sqrtf, M_PI, INFINITY
+from libc.string cimport memmove
 from libc.stdint cimport int32_t, uint32_t
 from raysort._rng cimport seed_key, sample_key, uniform_at
 from raysort._types cimport RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH, rs_prefetch
@@ -201,6 +202,19 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
     n_shadow[0] = m
 
 
+def _pack_rows(float[::1] flat, Py_ssize_t rows, Py_ssize_t n):
+    """The first ``n`` values of each of the ``rows`` rows of ``flat`` (a whole
+    ``len(flat) // rows`` apart) moved together in place: returns ``flat[:rows * n]`` as a
+    C-contiguous (rows, n) array, so the paths need not copy a slice of rows."""
+    cdef Py_ssize_t r, capacity = flat.shape[0] // rows
+    if not 0 <= n <= capacity:
+        raise ValueError("_pack_rows: 0 <= n <= len(flat) // rows expected")
+    with nogil:
+        for r in range(1, rows if n else 0):
+            memmove(&flat[r * n], &flat[r * capacity], n * sizeof(float))
+    return np.asarray(flat)[:rows * n].reshape(rows, n)
+
+
 def _shade(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
            const float[:, ::1] faces, const float[:, ::1] emitters, const float[::1] sky,
            const int32_t[::1] pixel,
@@ -278,19 +292,21 @@ class LambertShader(Shader):
         k_max = n if depth < self.max_depth else 0     # the last depth makes no bounce
         next_rays = RayBatch._unfilled(k_max)    # _shade writes every row of its rays
         next_parent = np.empty(k_max, dtype=np.int32)
-        next_thr = np.empty((3, k_max), dtype=np.float32)
+        next_thr = np.empty(3 * k_max, dtype=np.float32)     # rows k_max apart, then packed
         m_max = n * len(light_pos)
         sh_rays = RayBatch._unfilled(m_max)
         sh_parent = np.empty(m_max, dtype=np.int32)
         sh_slot = np.empty(m_max, dtype=np.int32)
         sh_contrib = np.empty((3, m_max), dtype=np.float32)
-        k, m = isa.module("shaders.lambert")._shade(rays.data, hits.t, hits.prim, faces, emitters, scene.sky, paths.pixel,
-                      paths.sample, paths.slot, paths.throughput, depth, self.max_depth,
-                      seed & 0xFFFFFFFF, self.russian_roulette, self.rr_depth, light_pos, light_int,
-                      radiance, next_rays.data, next_parent, next_thr, sh_rays.data,
-                      sh_parent, sh_slot, sh_contrib)
+        k, m = isa.module("shaders.lambert")._shade(
+            rays.data, hits.t, hits.prim, faces, emitters, scene.sky, paths.pixel, paths.sample,
+            paths.slot, paths.throughput, depth, self.max_depth, seed & 0xFFFFFFFF,
+            self.russian_roulette, self.rr_depth, light_pos, light_int, radiance,
+            next_rays.data, next_parent, next_thr.reshape(3, k_max), sh_rays.data, sh_parent,
+            sh_slot, sh_contrib)
         shadow = None
         if m:
             shadow = ShadowRays(sh_rays.truncate(m), sh_parent[:m], sh_slot[:m],
                                 sh_contrib[:, :m])
-        return Bounce(next_rays.truncate(k), next_parent[:k], next_thr[:, :k], shadow)
+        return Bounce(next_rays.truncate(k), next_parent[:k], _pack_rows(next_thr, 3, k),
+                      shadow)

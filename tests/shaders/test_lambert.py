@@ -127,3 +127,31 @@ def test_face_records_reject_an_emitters_table_of_the_wrong_size():
         with pytest.raises(ValueError, match="one per emitting face"):
             lambert._face_records(scene.face_normals(), scene.albedo, scene.emission, out,
                                   rows)
+
+
+@pytest.mark.parametrize("rows, capacity, n", [(3, 10, 7), (3, 10, 10), (3, 10, 0), (3, 0, 0),
+                                               (1, 5, 3), (3, 1000, 999)])
+def test_pack_rows_moves_each_rows_head_together(rows, capacity, n):
+    """The (rows, n) heads of rows ``capacity`` apart, packed in place into a C-contiguous
+    array (overlapping moves included): ``flat.reshape(rows, capacity)[:, :n]``."""
+    flat = np.arange(rows * capacity, dtype=np.float32)
+    want = flat.reshape(rows, capacity)[:, :n].copy()
+    got = lambert._pack_rows(flat, rows, n)
+    assert got.flags.c_contiguous and np.shares_memory(got, flat) or got.size == 0
+    assert got.shape == (rows, n) and np.array_equal(got, want)
+    with pytest.raises(ValueError):
+        lambert._pack_rows(flat, rows, capacity + 1)
+
+
+def test_the_next_throughput_is_contiguous():
+    """A bounce's throughput comes back C-contiguous (so the paths need not copy it),
+    one column per next ray."""
+    pipe = raysort.Pipeline("cornell")
+    records = []
+    pipe.render(16, 16, spp=2, tap=lambda r: records.append(r) if not r.shadow else None)
+    first = records[0]
+    radiance = np.zeros((16 * 16, 3))
+    bounce = pipe.shader.shade(pipe.scene, first.rays, first.hits, first.paths, 0, 0, radiance)
+    assert 0 < len(bounce.rays) < len(first.rays)       # some rays escape the box
+    assert bounce.throughput.shape == (3, len(bounce.rays))
+    assert bounce.throughput.flags.c_contiguous
