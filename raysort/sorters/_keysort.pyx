@@ -41,7 +41,7 @@ marks such rays inactive anyway.
 from libc.math cimport INFINITY, copysignf, fabsf
 from libc.stdint cimport int32_t, int64_t, uint32_t, uint64_t
 from libc.string cimport memset
-from raysort._types cimport rs_maxf, rs_minf
+from raysort._types cimport rs_maxf, rs_minf, RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX, RS_RAY_TMAX
 
 import math
 
@@ -538,28 +538,26 @@ def _inputs(rays, str coordinates, bounds, const uint64_t[:, :, ::1] table, floa
     for k in range(MAX_COORDS):
         for j in range(256):
             low_bytes |= table[k, 0, j] != 0
-    o, d = rays.origins, rays.directions
+    # the batch's rows themselves (RS_RAY_*), as nah reads them: no view per row
+    cdef const float[:, ::1] data = rays.data
     cdef const float[::1] row
-    rows = [np.ascontiguousarray(o[k]) for k in range(3)] + \
-        [np.ascontiguousarray(d[k]) for k in range(3)] + [np.ascontiguousarray(rays.tmax)]
+    if data.shape[0] != RS_RAY_ROWS or data.shape[1] < n:
+        raise ValueError(f"rays.data must hold the {RS_RAY_ROWS} rows of {n} rays")
     if prev_t is not None:
         prev_t = np.ascontiguousarray(prev_t, dtype=np.float32)
         if prev_t.shape != (n,):
             raise ConfigError(f"rays.prev_t has {prev_t.size} values for {n} rays")
-    out.keep = (rows, prev_t, table)
+    out.keep = (rays.data, prev_t, table)
     out.n = n
     if n == 0:
         return out
     for k in range(3):
-        row = rows[k]
-        out.a.o[k] = &row[0]
-        row = rows[3 + k]
-        out.a.d[k] = &row[0]
+        out.a.o[k] = &data[RS_RAY_OX + k, 0]
+        out.a.d[k] = &data[RS_RAY_DX + k, 0]
         out.a.lo[k] = box[0, k]
         out.a.hi[k] = box[1, k]
         out.a.scale[k] = inv[k]
-    row = rows[6]
-    out.a.tmax = &row[0]
+    out.a.tmax = &data[RS_RAY_TMAX, 0]
     out.a.prev_t = NULL
     if prev_t is not None:
         row = prev_t
