@@ -49,9 +49,9 @@ from raysort.stats import Counters
 __all__ = ["Pipeline", "RenderResult", "RenderStats", "Traced", "STAGES", "morton_order",
            "default_traversal"]
 
-#: stage names used in timings, in pipeline order ("check": the contract checks)
-#: the stages a render's CPU time is split into; ``other`` is the bookkeeping between
-#: them (the batches' set-up, the counters' running totals, the tiles put into the image)
+#: the stages a render's CPU time is split into, in pipeline order ("check": the contract
+#: checks; "other": the bookkeeping between the stages: the batches' set-up, the counters'
+#: running totals, the tiles put into the image)
 STAGES = ("generate", "sort", "check", "gather", "traverse", "scatter", "shade", "other")
 #: most random-number seeds: the counter-based generator keys on 32 bits
 MAX_SEED = 2**32 - 1
@@ -98,7 +98,8 @@ class RenderStats:
     ``shade`` includes the paths' bookkeeping after the shader: the next packets,
     the paths taken, adding the unoccluded shadow rays; ``other`` is the rest of
     the render's CPU time: setting up batches, adding up counters, putting tiles
-    into the image), so together they are the whole CPU time of a render;
+    into the image), so together they are all of a render's CPU time but its set-up
+    (the BVH, the shader's ``prepare``);
     ``wall_seconds`` is the elapsed time of the whole render.
     """
 
