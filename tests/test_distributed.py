@@ -180,7 +180,11 @@ def test_worker_without_the_plugin_names_plugin_and_worker(client_only_plugin, p
 # faults
 # --------------------------------------------------------------------------
 
-def test_killed_worker_tasks_run_elsewhere_and_the_image_is_unchanged(pipe, local):
+def test_killed_worker_tasks_run_elsewhere_and_the_image_is_unchanged(pipe):
+    # four times the frame of the other tests: 48 tasks, so that the busiest worker still
+    # holds some when the first tile comes back (with 12 the workers can finish them all)
+    size = (2 * SIZE[0], 2 * SIZE[1], SIZE[2])
+    local = pipe.render(*size)
     with cluster(n_workers=2, threads_per_worker=1, processes=True) as c, Client(c) as client:
         pids = client.run(os.getpid)
         killed = []
@@ -193,7 +197,7 @@ def test_killed_worker_tasks_run_elsewhere_and_the_image_is_unchanged(pipe, loca
                 os.kill(pids[victim], signal.SIGKILL)
 
         with dask.config.set({"raysort.tiles-per-task": 1}):
-            result = pipe.render(*SIZE, client=client, progress=kill_the_busiest)
+            result = pipe.render(*size, client=client, progress=kill_the_busiest)
         assert killed and killed[0] >= 1, "the killed worker had no task: nothing was tested"
         assert_same_image(result.image, local.image)
 
