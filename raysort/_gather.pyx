@@ -153,7 +153,7 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
     order on the way (unless ``check_order`` is False, for a trusted sorter): each
     sub-packet must hold rays of ``[0, n)`` from one large packet (``packets``: valid
     boundaries ending at n).  (That no ray comes twice is left to the scatter, which
-    writes each ray once: see :func:`scatter_each`.)  ``offsets`` must be valid
+    writes each ray once: see :func:`unwritten`.)  ``offsets`` must be valid
     (:func:`sub_packets`), ``len(order) == n``, and ``starts``/``dst``/... sized for
     them.  With ``t0``, the row ``t`` as gathered (each ray's tmax) is written there too.
 
@@ -230,78 +230,49 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
     return True, (index[bad_lane] if bad_lane >= 0 else -1)
 
 
-cdef int scatter_lanes(const float[:, ::1] rows, const int32_t[::1] prim, const float[::1] u,
-                       const float[::1] v, const int32_t[::1] index, float[::1] t_out,
-                       int32_t[::1] prim_out, float[::1] u_out, float[::1] v_out) noexcept nogil:
-    """Every lane's closest hit to its ray ``index[lane]`` (-1: none; a miss is t +inf,
-    prim -1, u = v = 0); 1, with nothing more written, at a lane whose index is beyond
-    the outputs, else 0."""
-    cdef Py_ssize_t s
-    cdef int32_t i
-    cdef uint32_t n = t_out.shape[0]
-    for s in range(index.shape[0]):
-        i = index[s]
-        if i < 0:
-            continue
-        if <uint32_t> i >= n:
-            return 1
-        if prim[s] >= 0:
-            t_out[i] = rows[RS_PACKET_T, s]
-            prim_out[i] = prim[s]
-            u_out[i] = u[s]
-            v_out[i] = v[s]
-        else:
-            t_out[i] = INFINITY
-            prim_out[i] = -1
-            u_out[i] = 0
-            v_out[i] = 0
-    return 0
-
-
-cdef int flag_lanes(const int32_t[::1] prim, const int32_t[::1] index,
-                    uint8_t[::1] out) noexcept nogil:
-    """``out[index[lane]]``: the lane found a hit (-1: no ray); 1, with nothing more
-    written, at an index beyond ``out``, else 0."""
-    cdef Py_ssize_t s
-    cdef uint32_t n = out.shape[0]
-    for s in range(index.shape[0]):
-        if index[s] >= 0:
-            if <uint32_t> index[s] >= n:
-                return 1
-            out[index[s]] = prim[s] >= 0
-    return 0
-
-
-cdef void lanes_match(Py_ssize_t lanes, Py_ssize_t prim, Py_ssize_t u, Py_ssize_t v,
-                      Py_ssize_t t_rows, Py_ssize_t t_lanes, str name) except *:
-    """ValueError unless every per-lane array has one value per lane."""
-    if not (prim == u == v == t_lanes == lanes and t_rows == RS_PACKET_ROWS):
-        raise ValueError(f"{name}: rows, prim, u, v and index must hold one value per lane")
-
-
 def scatter(const float[:, ::1] rows, const int32_t[::1] prim, const float[::1] u,
             const float[::1] v, const int32_t[::1] index, float[::1] t_out,
             int32_t[::1] prim_out, float[::1] u_out, float[::1] v_out):
     """Every lane's hit to its ray ``index[lane]`` (-1: none); False, with nothing more
     written, at a lane whose index is beyond the outputs."""
-    cdef int fault
-    lanes_match(index.shape[0], prim.shape[0], u.shape[0], v.shape[0], rows.shape[0],
-                rows.shape[1], "scatter")
-    if not (prim_out.shape[0] == u_out.shape[0] == v_out.shape[0] == t_out.shape[0]):
-        raise ValueError("scatter: t_out, prim_out, u_out and v_out must be of one length")
+    cdef Py_ssize_t s
+    cdef int32_t i
+    cdef uint32_t n = t_out.shape[0]
+    cdef bint ok = True
     with nogil:
-        fault = scatter_lanes(rows, prim, u, v, index, t_out, prim_out, u_out, v_out)
-    return not fault
+        for s in range(index.shape[0]):
+            i = index[s]
+            if i < 0:
+                continue
+            if <uint32_t> i >= n:
+                ok = False
+                break
+            if prim[s] >= 0:
+                t_out[i] = rows[RS_PACKET_T, s]
+                prim_out[i] = prim[s]
+                u_out[i] = u[s]
+                v_out[i] = v[s]
+            else:
+                t_out[i] = INFINITY
+                prim_out[i] = -1
+                u_out[i] = 0
+                v_out[i] = 0
+    return ok
 
 
 def scatter_occluded(const int32_t[::1] prim, const int32_t[::1] index, unsigned char[::1] out):
     """``out[index[lane]]``: the lane found a hit; False at an index beyond ``out``."""
-    cdef int fault
-    if prim.shape[0] != index.shape[0]:
-        raise ValueError("scatter_occluded: prim and index must hold one value per lane")
+    cdef Py_ssize_t s
+    cdef uint32_t n = out.shape[0]
+    cdef bint ok = True
     with nogil:
-        fault = flag_lanes(prim, index, out)
-    return not fault
+        for s in range(index.shape[0]):
+            if index[s] >= 0:
+                if <uint32_t> index[s] >= n:
+                    ok = False
+                    break
+                out[index[s]] = prim[s] >= 0
+    return ok
 
 
 def scatter_each(const float[:, ::1] rows, const int32_t[::1] prim, const float[::1] u,
@@ -311,37 +282,60 @@ def scatter_each(const float[:, ::1] rows, const int32_t[::1] prim, const float[
     t, prim (int32 bits), u, v, or with ``any_hit`` a uint8 (n,) array (1: occluded);
     ``fault`` 0, ``1`` at a lane whose index is beyond ``n`` (nothing more written), or
     ``2`` when a ray got no lane (so another came twice: a sorter's order that is no
-    permutation).  Every ray starts as the sentinel a lane overwrites."""
+    permutation)."""
     cdef Py_ssize_t s
-    cdef int fault, left = 0
+    cdef int32_t i
+    cdef int fault = 0, left = 0
+    cdef int32_t[::1] out_prim
+    cdef float[:, ::1] rows_out
     cdef uint8_t[::1] flags
-    cdef float[::1] t_out, u_out, v_out
-    cdef int32_t[::1] prim_out
-    if n < 0:
-        raise ValueError("scatter_each: n must not be negative")
+    if n < 0 or prim.shape[0] != index.shape[0] or (not any_hit and (
+            rows.shape[0] != RS_PACKET_ROWS or rows.shape[1] != index.shape[0]
+            or u.shape[0] != index.shape[0] or v.shape[0] != index.shape[0])):
+        raise ValueError("scatter_each: rows, prim, u, v and index must hold one value per lane")
     if any_hit:
-        if prim.shape[0] != index.shape[0]:
-            raise ValueError("scatter_each: prim and index must hold one value per lane")
-        out = np.full(n, UNWRITTEN_OCCLUDED, dtype=np.uint8)
+        out = np.empty(n, dtype=np.uint8)
         flags = out
         with nogil:
-            fault = flag_lanes(prim, index, flags)
+            for s in range(n):
+                flags[s] = UNWRITTEN_OCCLUDED
+            for s in range(index.shape[0]):
+                i = index[s]
+                if i >= 0:
+                    if i >= n:
+                        fault = 1
+                        break
+                    flags[i] = prim[s] >= 0
             if not fault:
                 for s in range(n):
                     left |= flags[s] == UNWRITTEN_OCCLUDED
         return out, fault or 2 * left
-    lanes_match(index.shape[0], prim.shape[0], u.shape[0], v.shape[0], rows.shape[0],
-                rows.shape[1], "scatter_each")
     out = np.empty((4, n), dtype=np.float32)
-    t_out, u_out, v_out = out[0], out[2], out[3]
-    prim_out = out[1].view(np.int32)
+    rows_out = out
+    out_prim = out[1].view(np.int32)
     with nogil:
         for s in range(n):
-            prim_out[s] = UNWRITTEN
-        fault = scatter_lanes(rows, prim, u, v, index, t_out, prim_out, u_out, v_out)
+            out_prim[s] = UNWRITTEN
+        for s in range(index.shape[0]):
+            i = index[s]
+            if i < 0:
+                continue
+            if i >= n:
+                fault = 1
+                break
+            if prim[s] >= 0:
+                rows_out[0, i] = rows[RS_PACKET_T, s]
+                out_prim[i] = prim[s]
+                rows_out[2, i] = u[s]
+                rows_out[3, i] = v[s]
+            else:
+                rows_out[0, i] = INFINITY
+                out_prim[i] = -1
+                rows_out[2, i] = 0
+                rows_out[3, i] = 0
         if not fault:
             for s in range(n):
-                left |= prim_out[s] == UNWRITTEN
+                left |= out_prim[s] == UNWRITTEN
     return out, fault or 2 * left
 
 
