@@ -16,7 +16,7 @@ from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t, uint64_t
 from libc.stdlib cimport calloc, free
 from libc.string cimport memcmp, memset
 from raysort._checks cimport (ray_bad, closest_bad, any_hit_bad, large_packet,
-                              sub_packet_bad)
+                              packet_bounds, sub_packet_bad)
 from raysort._types cimport (RS_RAY_OX, RS_RAY_OY, RS_RAY_OZ, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ,
                              RS_RAY_TMIN, RS_RAY_TMAX, RS_RAY_ROWS, RS_PACKET_ROWS,
                              RS_PACKET_TMIN, RS_PACKET_T)
@@ -70,11 +70,29 @@ cdef inline Py_ssize_t block_end(Py_ssize_t start, Py_ssize_t n) noexcept nogil:
 # a sorter's order and offsets
 # ---------------------------------------------------------------------------
 
+cdef int is_identity(const int32_t *order, int32_t n) noexcept nogil:
+    """``order[i] == i`` for every i < n (an unsorted batch), in blocks that vectorise."""
+    cdef Py_ssize_t i, a = 0, b
+    cdef int bad
+    while a < n:
+        b = block_end(a, n)
+        bad = 0
+        for i in range(a, b):
+            bad |= order[i] != i
+        if bad:
+            return 0
+        a = b
+    return 1
+
+
 cdef int sort_kernel(const int32_t *order, const int32_t *offsets, Py_ssize_t n_sub,
                      const int32_t *packets, Py_ssize_t n_big, int32_t n, int64_t max_packet,
                      uint8_t *seen, Py_ssize_t *where) noexcept nogil:
     cdef Py_ssize_t k, k_big = 0
     cdef int64_t a, b
+    cdef int32_t lo, hi
+    # the identity is a permutation: a sub-packet need only end in its first ray's packet
+    cdef int identity = is_identity(order, n)
     if offsets[0] != 0:
         return BAD_OFFSETS_START
     if offsets[n_sub] != n:
@@ -88,7 +106,10 @@ cdef int sort_kernel(const int32_t *order, const int32_t *offsets, Py_ssize_t n_
             return BAD_OFFSETS_RANGE
         if b - a > max_packet:
             return BAD_PACKET_SIZE
-        if sub_packet_bad(order, a, b, packets, n_big, n, &k_big, seen):
+        if identity:
+            if packet_bounds(<int32_t> a, packets, n_big, n, &k_big, &lo, &hi) or b > hi:
+                return sort_fault(order, a, b, packets, n_big, n, seen, k, where)
+        elif sub_packet_bad(order, a, b, packets, n_big, n, &k_big, seen):
             return sort_fault(order, a, b, packets, n_big, n, seen, k, where)
     return 0
 

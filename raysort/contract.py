@@ -319,6 +319,19 @@ def check_hits(plugin, packets, before, order, offsets, n_prim, any_hit):
         fail(f"lane {lane}: a hit with u = {u[lane]}, v = {v[lane]} (must be finite)")
 
 
+def batch_hit_fault(plugin, rays, hits, n_prim, ray):
+    """Report the hit of ``ray`` that a traversal reading the batch itself found to
+    break the hit contract (:func:`check_hits`'s rules) when it wrote ``hits``."""
+    fail = _failer("traversals", plugin)
+    if not -1 <= hits.prim[ray] < n_prim:
+        fail(f"ray {ray}: prim = {hits.prim[ray]} is neither -1 (a miss) nor a triangle "
+             f"index 0..{n_prim - 1}")
+    if not rays.tmin[ray] < hits.t[ray] < rays.tmax[ray]:
+        fail(f"ray {ray}: a hit at t = {hits.t[ray]} outside the ray's interval "
+             f"({rays.tmin[ray]}, {rays.tmax[ray]})")
+    fail(f"ray {ray}: a hit with u = {hits.u[ray]}, v = {hits.v[ray]} (must be finite), or "
+         f"a hit of an invalid ray")
+
 def check_packet_arrays(plugin, packets, arrays):
     """A traversal left ``packets`` holding the ``arrays`` it was given
     (:func:`packet_arrays`), unchanged in shape and type."""

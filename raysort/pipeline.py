@@ -42,7 +42,8 @@ from raysort.errors import ConfigError
 from raysort.params import boolean, integer
 from raysort.paths import Paths
 from raysort.progress import with_rays
-from raysort.rays import MAX_RAYS, Hits, RayBatch, add_unoccluded, gather_checked, scatter_checked
+from raysort.rays import (MAX_PACKET, MAX_RAYS, Hits, RayBatch, add_unoccluded, gather_checked,
+                          scatter_checked)
 from raysort.scene import Scene, load_scene
 from raysort.stats import Counters
 
@@ -381,6 +382,15 @@ class Pipeline:
         check_sort = self._checked(self.sorter)
         order, offsets = contract.sort_arrays(self.sorter, result, n) if check_sort else result
         clock.lap("check")
+        if self._reads_batch():
+            out, counters, bad_ray = self._trace_batch(rays, order, offsets, packets, any_hit,
+                                                       check_sort, clock, timings, threads)
+            if out is None:
+                contract.check_sort(self.sorter, result, n, packets)
+                raise AssertionError("the traversal rejected a sort result that check_sort "
+                                     "passes")
+            self._check_maker(maker, rays, bad_ray)
+            return out, counters
         check_hits = self._checked(self.traversal)
         batch, tmax, bad_ray = gather_checked(rays, order, offsets, packets,
                                               keep_tmax=check_hits and not any_hit,
@@ -389,10 +399,7 @@ class Pipeline:
         if batch is None:
             contract.check_sort(self.sorter, result, n, packets)
             raise AssertionError("the gather rejected a sort result that check_sort passes")
-        if bad_ray >= 0 and maker is not None and self._checked(maker[1]):
-            kind, plugin, label = maker
-            contract.check_rays(kind, plugin, rays, label)
-            raise AssertionError(f"the gather rejected ray {bad_ray}, which check_rays passes")
+        self._check_maker(maker, rays, bad_ray)
         arrays = contract.packet_arrays(batch) if check_hits else None
         counters = self._intersect(batch, any_hit, threads, timings)
         clock.lap("traverse")
@@ -410,6 +417,64 @@ class Pipeline:
             contract.check_sort(self.sorter, result, n, packets)
             raise AssertionError("the scatter left out a ray of an order check_sort passes")
         return out, counters
+
+    def _check_maker(self, maker, rays, bad_ray):
+        """Name the plugin whose ray ``bad_ray`` (-1: none) the gather found invalid."""
+        if bad_ray >= 0 and maker is not None and self._checked(maker[1]):
+            kind, plugin, label = maker
+            contract.check_rays(kind, plugin, rays, label)
+            raise AssertionError(f"the gather rejected ray {bad_ray}, which check_rays passes")
+
+    def _reads_batch(self):
+        """Whether the traversal reads the rays from the batch itself (raysort's own
+        ``stream``: ``_intersect_batch``) rather than from gathered packets."""
+        return (_trusted(type(self.traversal)) and len(self.bvh.triangles) > 0
+                and hasattr(self.traversal, "_intersect_batch"))
+
+    def _trace_batch(self, rays, order, offsets, packets, any_hit, check_sort, clock, timings,
+                     threads):
+        """:meth:`_trace` for a traversal that reads the batch in the sorter's order and
+        writes the hits in batch order itself: no packets, no gather and no scatter (its
+        own copy of each ray is the gather).  The sorter's result is checked first
+        (unless trusted); the traversal checks each hit as it writes it.  Returns
+        ``(hits, counters, bad_ray)``, or None for hits if the order is not valid."""
+        n = len(rays)
+        if check_sort and isa.module("_contract").sort_result(order, offsets, packets, n,
+                                                              MAX_PACKET)[0]:
+            return None, None, -1
+        out = np.empty(n, np.uint8) if any_hit else np.empty((4, n), np.float32)
+        clock.lap("check")
+
+        def run(k0, k1):
+            start = time.thread_time()
+            result = contract.call_plugin("traversals", self.traversal, "_intersect_batch",
+                                          self.bvh, rays.data, order, offsets, k0, k1,
+                                          any_hit, out)
+            return result, time.thread_time() - start
+
+        m = len(offsets) - 1
+        cuts = np.linspace(0, m, max(1, min(threads, m)) + 1).astype(int)
+        if len(cuts) > 2:
+            with ThreadPoolExecutor(max_workers=len(cuts) - 1) as pool:
+                parts = list(pool.map(run, cuts[:-1], cuts[1:]))
+            if timings is not None:     # the workers' CPU time: the caller only waited
+                timings["traverse"] = (timings.get("traverse", 0.0)
+                                       + sum(seconds for _, seconds in parts))
+        else:
+            parts = [run(0, m)]
+        hits = out.view(bool) if any_hit else Hits._of_block(out)
+        counters, bad = Counters(), []
+        for (part, bad_ray, bad_hit, order_ok), _ in parts:
+            if not order_ok:                    # an entry outside [0, n)
+                return None, None, -1
+            if bad_hit >= 0:
+                contract.batch_hit_fault(self.traversal, rays, hits, len(self.bvh.faces),
+                                         bad_hit)
+            counters += contract.check_counters(self.traversal, part)
+            if bad_ray >= 0:
+                bad.append(bad_ray)
+        clock.lap("traverse" if len(parts) == 1 else None)
+        return hits, counters, min(bad, default=-1)
 
     def _intersect(self, batch, any_hit, threads=1, timings=None):
         def run(part):

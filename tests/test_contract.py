@@ -18,6 +18,7 @@ from raysort.errors import PluginContractError, RaysortError
 from raysort.rays import MAX_PACKET, RayBatch
 from raysort.sorters.none import NoneSorter
 from raysort.stats import Counters
+from raysort.traversals.stream import StreamTraversal
 
 NAME = "my_sorter"
 N = 10
@@ -285,7 +286,9 @@ def test_every_kind_is_checked_unless_trusted(check_calls, check_plugins):
         assert vars(type(plugin)).get("trusted") is True, plugin
     pipe.render(8, 8, 1)
     expected = {(CHECKS[kind], getattr(pipe, kind[:-1]).name) for kind in CHECKS
-                if kind != "traversals"} | {("scatter_checked", "<the pipeline's traversal>")}
+                if kind != "traversals"}
+    if not pipe._reads_batch():     # stream checks each hit itself as it writes it
+        expected.add(("scatter_checked", "<the pipeline's traversal>"))
     assert set(check_calls) == (expected if check_plugins else set())
 
 
@@ -320,13 +323,51 @@ def _repeat_first_ray(self, rays, packets, bounds):
 ])
 def test_fused_checks_catch_builtin_plugins(monkeypatch, kind, method, broken, match):
     """A built-in sorter or traversal gone wrong is caught by the checks inside the gather
-    and the scatter, and named."""
-    pipe = raysort.Pipeline("plane")
+    and the scatter, and named (``wide8``: a traversal of gathered packets)."""
+    pipe = raysort.Pipeline("plane", traversal="wide8")
     plugin = getattr(pipe, kind[:-1])
     monkeypatch.setattr(type(plugin), method, broken)
     with pytest.raises(PluginContractError, match=match) as info:
         pipe.render(8, 8, 2)            # two sample passes: two large packets per batch
     assert (info.value.kind, info.value.name) == (kind, plugin.name)
+
+
+def _break_first_hit(value):
+    real = StreamTraversal._intersect_batch
+
+    def intersect_batch(self, bvh, rays, order, offsets, k0, k1, any_hit, out):
+        counters, bad_ray, bad_hit, order_ok = real(self, bvh, rays, order, offsets, k0, k1,
+                                                    any_hit, out)
+        out[1].view(np.int32)[order[offsets[k0]]] = value
+        return counters, bad_ray, order[offsets[k0]], order_ok
+    return intersect_batch
+
+
+@pytest.mark.parametrize("sorter, broken, match", [
+    ("none", _repeat_first_ray, "permutation"),
+    ("nah", _repeat_first_ray, "permutation"),
+    ("none", _one_sub_packet, "mixes rays of different large packets"),
+])
+def test_stream_reading_the_batch_checks_the_sorter(monkeypatch, sorter, broken, match):
+    """Without packets (``stream`` reads the batch in the sorter's order) a built-in
+    sorter gone wrong is still caught before the trace, and named."""
+    pipe = raysort.Pipeline("plane", sorter=sorter, traversal="stream")
+    assert pipe._reads_batch()
+    monkeypatch.setattr(type(pipe.sorter), "sort", broken)
+    with pytest.raises(PluginContractError, match=match) as info:
+        pipe.render(8, 8, 2)
+    assert (info.value.kind, info.value.name) == ("sorters", sorter)
+
+
+@pytest.mark.parametrize("check_plugins", [True, False])
+def test_stream_reading_the_batch_reports_a_hit_it_flags(monkeypatch, check_plugins):
+    """A hit that ``stream``'s kernel flags as it writes it (the rules of check_hits, on
+    every hit whatever check_plugins says) is reported with the ray and the traversal."""
+    pipe = raysort.Pipeline("plane", traversal="stream", check_plugins=check_plugins)
+    monkeypatch.setattr(StreamTraversal, "_intersect_batch", _break_first_hit(50_000_000))
+    with pytest.raises(PluginContractError, match="prim = 50000000") as info:
+        pipe.render(8, 8, 1)
+    assert (info.value.kind, info.value.name) == ("traversals", "stream")
 
 
 def test_untrusted_valid_sorter_is_checked_and_works(registered, check_calls):

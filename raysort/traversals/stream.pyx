@@ -23,9 +23,12 @@ streams of ``stream_size`` rays.  Sub-packet boundaries do not matter; a
 sorter helps through the order (neighbouring rays share nodes and leaves,
 so streams stay large deeper in the tree).
 """
-from libc.stdint cimport int32_t, int64_t, uint8_t
+from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.stdlib cimport malloc, free
-from raysort._types cimport rs_node4, rs_node8, rs_tri, rs_tri8, rs_rays, rs_counters, rays_view
+from raysort._types cimport (rs_node4, rs_node8, rs_tri, rs_tri8, rs_rays, rs_counters, rays_view,
+                             RS_RAY_ROWS)
+
+import numpy as np
 
 from raysort import isa
 from raysort.sdk import ConfigError, Counters, PluginContractError, Traversal, boolean, integer
@@ -40,12 +43,28 @@ cdef extern from "raysort/stream.h" nogil:
         int depth
     int rs_stream_alloc(rs_stream_scratch *w, int size, int width, int depth)
     void rs_stream_free(rs_stream_scratch *w)
-    void rs_stream_trace4(const rs_node4 *nodes, const rs_tri *tris, rs_rays *r, int n,
-                          int any_hit, int order, int min_stream, rs_stream_scratch *w,
-                          rs_counters *c)
-    void rs_stream_trace8(const rs_node8 *nodes, const rs_tri8 *groups, rs_rays *r, int n,
-                          int any_hit, int order, int min_stream, rs_stream_scratch *w,
-                          rs_counters *c)
+    void rs_stream_trace(int width, const void *tree, const void *leaves, rs_rays *r, int n,
+                         int any_hit, int order, int min_stream, rs_stream_scratch *w,
+                         rs_counters *c)
+
+cdef extern from "raysort/stream_batch.h" nogil:
+    ctypedef struct rs_batch_hits:
+        float *t
+        int32_t *prim
+        float *u
+        float *v
+        uint8_t *occluded
+    ctypedef struct rs_batch_status:
+        int64_t active
+        int64_t bad_ray
+        int64_t bad_hit
+        int order_bad
+    rs_batch_status rs_stream_batch(int width, const void *tree, const void *leaves,
+                                    const float *const *src, int64_t n_src, const int32_t *order,
+                                    const int32_t *offsets, int k0, int k1, int any_hit,
+                                    int order_kind, int min_stream, int frustum,
+                                    uint32_t n_prim, rs_stream_scratch *w, rs_frustum_entry *stack,
+                                    rs_batch_hits *out, rs_counters *c)
 
 
 cdef extern from "raysort/frustum.h" nogil:
@@ -61,18 +80,6 @@ cdef extern from "raysort/frustum.h" nogil:
                          rs_counters *c)
 
 
-cdef void trace_stream(int width, const void *tree, const void *leaves, rs_rays *r, int n,
-                       int any_hit, int order, int min_stream, rs_stream_scratch *w,
-                       rs_counters *c) noexcept nogil:
-    """One stream through the 4-wide or the 8-wide tree."""
-    if width == 8:
-        rs_stream_trace8(<const rs_node8 *> tree, <const rs_tri8 *> leaves, r, n, any_hit, order,
-                         min_stream, w, c)
-    else:
-        rs_stream_trace4(<const rs_node4 *> tree, <const rs_tri *> leaves, r, n, any_hit, order,
-                         min_stream, w, c)
-
-
 #: the child orders ``order`` accepts, by name
 ORDERS = {"direction": RS_ORDER_DIRECTION, "votes": RS_ORDER_VOTES}
 #: the trees ``tree`` accepts: children per node
@@ -84,6 +91,24 @@ MAX_STREAM = 1 << 20
 def lanes():
     """Rays per SIMD test in this ISA build of the kernel."""
     return RS_SW
+
+
+def _tree(bvh, int width):
+    """``(nodes, leaves, depth)`` of the 8-wide or the 4-wide tree of ``bvh``."""
+    if width == 8:
+        tree8 = bvh.wide8
+        return tree8.nodes, tree8.groups, tree8.depth
+    return bvh.wide, bvh.triangles, bvh.wide_depth
+
+
+cdef _counters(const rs_counters *c, const rs_stream_scratch *w, long long active):
+    """The Counters of a call: ``c``, and the stream sizes per level in ``w``."""
+    cdef int levels = w.depth + 1
+    while levels > 0 and w.level_rays[levels - 1] == 0:
+        levels -= 1
+    return Counters(rays=active, ia=c.ia, box1=c.box1, box4=c.box4, tri1=c.tri1, tri4=c.tri4,
+                    stream_tasks=c.stream_tasks, stream_rays=c.stream_rays,
+                    stream_level_rays=tuple([w.level_rays[k] for k in range(levels)]))
 
 
 def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream, int width,
@@ -104,11 +129,7 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
                                       f"{capacity} lanes of the batch")
     if n_packets == 0 or len(bvh.triangles) == 0:
         return Counters()
-    if width == 8:
-        tree8 = bvh.wide8
-        node_array, leaf_array, depth = tree8.nodes, tree8.groups, tree8.depth
-    else:
-        node_array, leaf_array, depth = bvh.wide, bvh.triangles, bvh.wide_depth
+    node_array, leaf_array, depth = _tree(bvh, width)
     cdef const uint8_t[::1] node_bytes = node_array.view("u1").reshape(-1)
     cdef const uint8_t[::1] leaf_bytes = leaf_array.view("u1").reshape(-1)
     cdef const void *tree = <const void *> &node_bytes[0]
@@ -152,22 +173,92 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
                             w.ids[m] = i
                             m += 1
                             if m == size:
-                                trace_stream(width, tree, leaves, &rays, m, any_hit, order,
-                                             min_stream, &w, &c)
+                                rs_stream_trace(width, tree, leaves, &rays, m, any_hit, order,
+                                                min_stream, &w, &c)
                                 m = 0
                     s = e
             if m:
-                trace_stream(width, tree, leaves, &rays, m, any_hit, order, min_stream, &w, &c)
-        levels = w.depth + 1
-        while levels > 0 and w.level_rays[levels - 1] == 0:
-            levels -= 1
-        level_rays = tuple([w.level_rays[k] for k in range(levels)])
+                rs_stream_trace(width, tree, leaves, &rays, m, any_hit, order, min_stream, &w, &c)
+        counters = _counters(&c, &w, active)
     finally:
         rs_stream_free(&w)
         free(chunk_stack)
-    return Counters(rays=active, ia=c.ia, box1=c.box1, box4=c.box4, tri1=c.tri1, tri4=c.tri4,
-                    stream_tasks=c.stream_tasks, stream_rays=c.stream_rays,
-                    stream_level_rays=level_rays)
+    return counters
+
+
+def trace_batch(bvh, const float[:, ::1] src, const int32_t[::1] order,
+                const int32_t[::1] offsets, int k0, int k1, bint any_hit, out, int stream_size,
+                int order_kind, int min_stream, int width, bint frustum=False):
+    """Sub-packets ``k0 <= k < k1`` of a sorter's result (``order``, ``offsets``, both
+    checked by the caller but for the range of ``order``) straight from the batch's
+    ray rows ``src`` (``RayBatch.data``), without packets: their hits to ``out``,
+    a float32 (4, n) block (rows t, prim as int32 bits, u, v) or, with ``any_hit``,
+    a uint8 (n,) array (1: occluded).  The rays get the gather's rules (a ray that
+    breaks the ray contract is traced as a miss) and the streams, chunks, counters and
+    hits of :func:`trace` over the gathered packets (stream_batch.h).
+
+    Returns ``(Counters, bad_ray, bad_hit, order_ok)``: ``bad_ray`` as the gather's (a
+    ray that breaks the ray contract, or -1); ``bad_hit`` a ray whose hit breaks the hit
+    contract (the rules of :func:`raysort.contract.check_hits`), or -1; ``order_ok``
+    False at an order entry outside ``[0, n)`` (nothing more is traced)."""
+    cdef Py_ssize_t n = order.shape[0]
+    cdef float[:, ::1] block
+    cdef uint8_t[::1] flags
+    cdef int32_t[::1] prim
+    cdef rs_batch_hits hits
+    cdef rs_batch_status status
+    cdef const float *rows[RS_RAY_ROWS]
+    cdef rs_counters c
+    cdef rs_stream_scratch w
+    cdef rs_frustum_entry *stack = NULL
+    cdef int a, size
+    cdef uint32_t n_prim = len(bvh.faces)
+    if src.shape[0] != RS_RAY_ROWS or src.shape[1] < n or n == 0:
+        raise ValueError("trace_batch: src must hold the ray rows of the n >= 1 rays of order")
+    if not (0 <= k0 <= k1 < offsets.shape[0]):
+        raise ValueError(f"trace_batch: sub-packets {k0}..{k1} of {offsets.shape[0] - 1}")
+    if any_hit:
+        flags = out
+        if flags.shape[0] != n:
+            raise ValueError("trace_batch: one flag per ray")
+        hits.occluded = &flags[0]
+        hits.t = hits.u = hits.v = NULL
+        hits.prim = NULL
+    else:
+        block = out
+        if block.shape[0] != 4 or block.shape[1] != n:
+            raise ValueError("trace_batch: out must be a (4, n) block")
+        prim = out[1].view(np.int32)
+        hits.occluded = NULL
+        hits.t, hits.prim, hits.u, hits.v = &block[0, 0], &prim[0], &block[2, 0], &block[3, 0]
+    for a in range(RS_RAY_ROWS):
+        rows[a] = &src[a, 0]
+    node_array, leaf_array, depth = _tree(bvh, width)
+    cdef const uint8_t[::1] node_bytes = node_array.view("u1").reshape(-1)
+    cdef const uint8_t[::1] leaf_bytes = leaf_array.view("u1").reshape(-1)
+    c.rays = c.ia = c.box1 = c.box4 = c.tri1 = c.tri4 = c.stream_tasks = c.stream_rays = 0
+    if len(bvh.triangles) == 0:
+        raise ValueError("trace_batch: the scene has no triangles (trace its packets instead)")
+    size = <int> min(stream_size, offsets[k1] - offsets[k0])
+    if size < 1:
+        return Counters(), -1, -1, True
+    frustum = frustum and width == 8
+    if not rs_stream_alloc(&w, size, width, depth):
+        raise MemoryError()
+    try:
+        stack = <rs_frustum_entry *> malloc((7 * depth + 8) * sizeof(rs_frustum_entry))
+        if stack == NULL:
+            raise MemoryError()
+        with nogil:
+            status = rs_stream_batch(width, <const void *> &node_bytes[0],
+                                     <const void *> &leaf_bytes[0], rows, n, &order[0],
+                                     &offsets[0], k0, k1, any_hit, order_kind, min_stream,
+                                     frustum, n_prim, &w, stack, &hits, &c)
+        counters = _counters(&c, &w, status.active)
+    finally:
+        rs_stream_free(&w)
+        free(stack)
+    return counters, status.bad_ray, status.bad_hit, not status.order_bad
 
 
 class StreamTraversal(Traversal):
@@ -236,3 +327,11 @@ class StreamTraversal(Traversal):
                                                      ORDERS[self.order], self.min_stream,
                                                      self.tree, self.frustum)
 
+
+    def _intersect_batch(self, bvh, rays, order, offsets, k0, k1, any_hit, out):
+        """The pipeline's path without packets (raysort.pipeline, ``_reads_batch``):
+        sub-packets ``k0..k1`` of the sorter's result straight from the batch's rows
+        ``rays`` into the batch-order hits ``out`` (:func:`trace_batch`)."""
+        return isa.module("traversals.stream").trace_batch(
+            bvh, rays, order, offsets, k0, k1, any_hit, out, self.stream_size,
+            ORDERS[self.order], self.min_stream, self.tree, self.frustum)

@@ -12,7 +12,8 @@ import pytest
 import raysort
 from raysort import isa
 from raysort.bvh import BVH
-from raysort.rays import PacketRow, RayBatch, gather, scatter, scatter_occluded
+from raysort.rays import (Hits, PacketRow, RayBatch, RayRow, gather, scatter,
+                          scatter_occluded)
 from raysort.reference import brute_force
 from raysort.stats import Counters
 from raysort.workloads import camera_rays
@@ -51,6 +52,27 @@ def trace(bvh, rays, ray_order=None, offsets=None, any_hit=False, **params):
                                                                          any_hit=any_hit)
     hits = scatter_occluded(packets, n) if any_hit else scatter(packets, n)
     return hits, counters
+
+
+def trace_batch(bvh, rays, ray_order=None, offsets=None, any_hit=False, parts=1, **params):
+    """``trace`` without packets: ``stream`` reads the batch in ``ray_order`` itself and
+    writes the hits in batch order (the pipeline's path), the sub-packets cut into
+    ``parts`` calls.  Returns ``(hits, counters, bad_ray)``."""
+    n = len(rays)
+    ray_order = np.arange(n, dtype=np.int32) if ray_order is None else \
+        np.asarray(ray_order, np.int32)
+    offsets = np.array([0, n], np.int32) if offsets is None else offsets
+    traversal = raysort.create("traversals", {"type": "stream", **params})
+    out = np.empty(n, np.uint8) if any_hit else np.empty((4, n), np.float32)
+    counters, bad = Counters(), []
+    cuts = np.linspace(0, len(offsets) - 1, parts + 1).astype(int)
+    for k0, k1 in zip(cuts[:-1], cuts[1:]):
+        part, bad_ray, bad_hit, order_ok = traversal._intersect_batch(
+            bvh, rays.data, ray_order, offsets, k0, k1, any_hit, out)
+        assert order_ok and bad_hit == -1
+        counters += part
+        bad += [bad_ray] if bad_ray >= 0 else []
+    return (out.view(bool) if any_hit else Hits._of_block(out)), counters, min(bad, default=-1)
 
 
 def fixed_offsets(n, size):
@@ -111,6 +133,88 @@ def test_soup_matches_brute_force(each_isa, soup, params):
     occluded, _ = trace(bvh, rays, order, offsets, any_hit=True, **params)
     assert np.array_equal(occluded, ref.prim >= 0)
     assert counters.rays == len(rays)
+
+
+@pytest.mark.parametrize("params", SETTINGS, ids=lambda p: "-".join(map(str, p.values())))
+def test_reading_the_batch_matches_brute_force_and_the_packets(each_isa, soup, params):
+    """Without packets (the pipeline's path): brute force's hits and any-hit flags, and
+    the counters of the same rays gathered into packets, in one call or in three."""
+    V, F, bvh, rays, ref = soup
+    rng = np.random.default_rng(5)
+    order = rng.permutation(len(rays))
+    offsets = fixed_offsets(len(rays), int(rng.integers(1, 300)))
+    _, expected = trace(bvh, rays, order, offsets, **params)
+    for parts in (1, 3):
+        hits, counters, bad_ray = trace_batch(bvh, rays, order, offsets, parts=parts, **params)
+        assert_same_hits(hits, ref, f"{each_isa} {params} parts={parts}")
+        assert bad_ray == -1
+        if parts == 1:
+            assert counters == expected
+        occluded, _, _ = trace_batch(bvh, rays, order, offsets, any_hit=True, parts=parts,
+                                     **params)
+        assert np.array_equal(occluded, ref.prim >= 0)
+
+
+@pytest.mark.parametrize("frustum", [True, False])
+def test_reading_the_batch_takes_the_frustum_walk_as_the_packets(each_isa, sibenik, frustum):
+    """Camera rays in 8x8 sub-packets read from the batch: the hits of brute force, and the
+    packet path's counters (the same chunks take the frustum walk)."""
+    rays = camera_rays(sibenik, 64, 64)[0].rays
+    ref = brute_force(sibenik.vertices, sibenik.faces, rays)
+    order, offsets = raysort.create("sorters", "none").sort(
+        rays, np.array([0, len(rays)], np.int32), sibenik.bvh().bounds)
+    _, expected = trace(sibenik.bvh(), rays, order, offsets, frustum=frustum)
+    hits, counters, _ = trace_batch(sibenik.bvh(), rays, order, offsets, frustum=frustum)
+    assert_same_hits(hits, ref, f"{each_isa} sibenik camera, frustum={frustum}")
+    assert counters == expected
+    assert (counters.ia > 0) == frustum
+
+
+def test_reading_the_batch_traces_invalid_rays_as_misses(each_isa, soup):
+    """Rays that break the ray contract (NaN, infinite, tmin < 0) are misses, and the first
+    in the sorter's order is reported, as the gather does; empty intervals are misses
+    without a report."""
+    V, F, bvh, rays, ref = soup
+    bad = RayBatch(len(rays))
+    bad.data[:] = rays.data
+    broken = {7: ("ox", np.nan), 40: ("dy", np.inf), 3: ("tmin", -1.0)}
+    for ray, (row, value) in broken.items():
+        bad.data[int(RayRow[row]), ray] = value
+    bad.data[int(RayRow.tmax), 11] = bad.data[int(RayRow.tmin), 11]     # empty: a miss
+    order = np.arange(len(rays), dtype=np.int32)[::-1].copy()
+    hits, _, bad_ray = trace_batch(bvh, bad, order)
+    assert bad_ray == 40                # the first of 7, 40, 3 in the reversed order
+    for ray in (*broken, 11):
+        assert hits.prim[ray] == -1 and hits.t[ray] == np.inf
+    keep = np.setdiff1d(np.arange(len(rays)), [*broken, 11])
+    assert np.array_equal(hits.prim[keep], ref.prim[keep])
+
+
+def test_reading_the_batch_refuses_an_order_beyond_the_rays(soup):
+    """An order entry outside [0, n) stops the call (order_ok False) before any read."""
+    V, F, bvh, rays, ref = soup
+    traversal = raysort.create("traversals", "stream")
+    for wrong in (len(rays), -1, 2**31 - 1):
+        order = np.arange(len(rays), dtype=np.int32)
+        order[100] = wrong
+        out = np.empty((4, len(rays)), np.float32)
+        *_, order_ok = traversal._intersect_batch(bvh, rays.data, order,
+                                                  np.array([0, len(rays)], np.int32), 0, 1,
+                                                  False, out)
+        assert not order_ok
+
+
+def test_reading_the_batch_flags_a_hit_beyond_the_mesh(soup):
+    """Each hit is checked as it is written: a BVH whose mesh is shorter than its triangle
+    ids makes the kernel report a hit (the rules of check_hits: prim below n_prim)."""
+    from types import SimpleNamespace
+    V, F, bvh, rays, ref = soup
+    short = SimpleNamespace(faces=bvh.faces[:10], triangles=bvh.triangles, wide8=bvh.wide8)
+    out = np.empty((4, len(rays)), np.float32)
+    _, _, bad_hit, order_ok = raysort.create("traversals", "stream")._intersect_batch(
+        short, rays.data, np.arange(len(rays), dtype=np.int32),
+        np.array([0, len(rays)], np.int32), 0, 1, False, out)
+    assert order_ok and bad_hit >= 0 and ref.prim[bad_hit] >= 10
 
 
 @pytest.mark.parametrize("params", SETTINGS[:6] + SETTINGS[-6:],

@@ -278,9 +278,9 @@ RS_INLINE void rs_frustum_chunk(const rs_node8 *nodes, const rs_tri8 *groups, rs
 }
 
 /* Lanes [start, start + count) in chunks of RS_FRUSTUM_CHUNK. */
-static void rs_frustum_trace8(const rs_node8 *nodes, const rs_tri8 *groups, rs_rays *r,
-                              int start, int count, int any_hit, rs_frustum_entry *stack,
-                              rs_stream_entry *single, rs_counters *c)
+RS_INLINE void rs_frustum_trace8(const rs_node8 *nodes, const rs_tri8 *groups, rs_rays *r,
+                                 int start, int count, int any_hit, rs_frustum_entry *stack,
+                                 rs_stream_entry *single, rs_counters *c)
 {
     for (int s = start; s < start + count; s += RS_FRUSTUM_CHUNK) {
         int e = s + RS_FRUSTUM_CHUNK < start + count ? s + RS_FRUSTUM_CHUNK : start + count;

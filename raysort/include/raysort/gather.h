@@ -95,9 +95,9 @@ RS_INLINE int rs_gather_block(float *const dst[RS_PACKET_ROWS], int32_t *prim, f
  * -1 or a lane of src, which holds at least one.  Lanes past the last full block go through a
  * block-sized scratch.  Returns the first lane holding a ray that breaks the ray
  * contract (stored inactive), or -1. */
-static int64_t rs_gather_lanes(float *const dst[RS_PACKET_ROWS], int32_t *prim, float *u,
-                               float *v, float *tmax, const float *const src[RS_RAY_ROWS],
-                               const int32_t *index, int64_t capacity, int64_t n_src)
+RS_INLINE int64_t rs_gather_lanes(float *const dst[RS_PACKET_ROWS], int32_t *prim, float *u,
+                                  float *v, float *tmax, const float *const src[RS_RAY_ROWS],
+                                  const int32_t *index, int64_t capacity, int64_t n_src)
 {
     int64_t j = 0, first_bad = -1;
     int bits;

@@ -69,7 +69,7 @@ typedef struct rs_stream_ray {
     int32_t prim;
     float u, v;
     int32_t ray;
-    int32_t unused;
+    float t0;           /* t before the walk (the ray's tmax), for a check of the hit */
 } rs_stream_ray;
 
 #define RS_STREAM_RAY_FLOATS 16     /* sizeof(rs_stream_ray) / 4: the sw_rows8 stride */
@@ -517,30 +517,39 @@ RS_INLINE void rs_stream_records(const rs_rays *r, int32_t *ids, int n, rs_strea
         x->u = r->u[i];
         x->v = r->v[i];
         x->ray = i;
-        x->unused = 0;
+        x->t0 = x->t;
         ids[j] = j;
     }
 }
 
-/* Copy the closest hit of record x to its ray, or (to_ray = 0) back. */
-RS_INLINE void rs_stream_sync(rs_rays *r, rs_stream_ray *x, int to_ray)
+/* Copy the closest hit of record x to its ray of r. */
+RS_INLINE void rs_stream_sync(rs_rays *r, const rs_stream_ray *x)
 {
     int32_t i = x->ray;
-    if (to_ray) {
-        r->t[i] = x->t;
-        r->prim[i] = x->prim;
-        r->u[i] = x->u;
-        r->v[i] = x->v;
-    } else {
-        x->t = r->t[i];
-        x->prim = r->prim[i];
-        x->u = r->u[i];
-        x->v = r->v[i];
-    }
+    r->t[i] = x->t;
+    r->prim[i] = x->prim;
+    r->u[i] = x->u;
+    r->v[i] = x->v;
 }
 
-/* Trace the n <= w->size rays whose ids are w->ids[0, n) (the walk overwrites
- * them with the indices of their records in w->rec) from the root of a tree of
+/* The record x as a batch of one ray (ray 0), for the single-ray kernels: they
+ * read and shrink its hit in place. */
+RS_INLINE void rs_stream_view(rs_stream_ray *x, rs_rays *one)
+{
+    for (int a = 0; a < 3; ++a) {
+        one->o[a] = &x->o[a];
+        one->d[a] = &x->d[a];
+        one->inv[a] = &x->inv[a];
+    }
+    one->tmin = &x->tmin;
+    one->t = &x->t;
+    one->prim = &x->prim;
+    one->u = &x->u;
+    one->v = &x->v;
+}
+
+/* Trace the n <= w->size rays of the records w->rec[0, n), whose ids w->ids[0, n)
+ * are 0, 1, ..., n - 1 (the caller builds both), from the root of a tree of
  * w->width children per node: rs_node4 nodes and rs_tri leaves
  * (width 4) or rs_node8 nodes and rs_tri8 leaf groups (width 8).  Streams of
  * fewer than min_stream rays finish one ray at a time.
@@ -553,9 +562,9 @@ RS_INLINE void rs_stream_sync(rs_rays *r, rs_stream_ray *x, int to_ray)
  * stream_tasks and stream_rays count the streams popped and the rays they
  * held, w->level_rays the same rays by the level of the box the stream was
  * popped at (they add up to stream_rays). */
-RS_INLINE void rs_stream_walk(const int width, const void *tree, const void *leaves, rs_rays *r,
-                              int n, int any_hit, int order, int min_stream,
-                              rs_stream_scratch *w, rs_counters *c)
+RS_INLINE void rs_stream_walk(const int width, const void *tree, const void *leaves, int n,
+                              int any_hit, int order, int min_stream, rs_stream_scratch *w,
+                              rs_counters *c)
 {
     int cnt[RS_STREAM_MAX_WIDTH], votes[RS_STREAM_MAX_WIDTH], visit[RS_STREAM_MAX_WIDTH];
     int negative[3];
@@ -565,7 +574,6 @@ RS_INLINE void rs_stream_walk(const int width, const void *tree, const void *lea
     const rs_tri8 *groups = (const rs_tri8 *)leaves;
     rs_stream_ray *rec = w->rec;
     int nt = 1;
-    rs_stream_records(r, w->ids, n, rec);
     w->tasks[0].ref = 0;
     w->tasks[0].tris = 0;
     w->tasks[0].first = 0;
@@ -577,16 +585,16 @@ RS_INLINE void rs_stream_walk(const int width, const void *tree, const void *lea
         if (task.n < min_stream) {
             for (int j = 0; j < task.n; ++j) {
                 rs_stream_ray *x = &rec[ids[j]];
+                rs_rays one;
                 if (!(x->tmin < x->t))
                     continue;
-                rs_stream_sync(r, x, 1);
+                rs_stream_view(x, &one);
                 if (width == 8)
-                    rs_stream_single8(nodes8, groups, r, x->ray, task.ref, task.tris, any_hit,
+                    rs_stream_single8(nodes8, groups, &one, 0, task.ref, task.tris, any_hit,
                                       w->single, c);
                 else
-                    rs_stream_single4(nodes4, tris, r, x->ray, task.ref, task.tris, any_hit,
+                    rs_stream_single4(nodes4, tris, &one, 0, task.ref, task.tris, any_hit,
                                       w->single, c);
-                rs_stream_sync(r, x, 0);
             }
             continue;
         }
@@ -634,24 +642,19 @@ RS_INLINE void rs_stream_walk(const int width, const void *tree, const void *lea
                                    : (const void *)&tris[-ref - 1], 2);
         }
     }
+}
+
+/* Trace the rays ids[0, n) of r (n <= w->size; the ids are overwritten) through
+ * the 4-wide tree (BVH.wide, BVH.triangles) or the 8-wide one (BVH.wide8's
+ * nodes and groups): their records, the walk, their hits back to r. */
+static inline void rs_stream_trace(const int width, const void *tree, const void *leaves,
+                                   rs_rays *r, int n, int any_hit, int order, int min_stream,
+                                   rs_stream_scratch *w, rs_counters *c)
+{
+    rs_stream_records(r, w->ids, n, w->rec);
+    rs_stream_walk(width, tree, leaves, n, any_hit, order, min_stream, w, c);
     for (int j = 0; j < n; ++j)
-        rs_stream_sync(r, &rec[j], 1);
-}
-
-/* rs_stream_walk over the 4-wide tree (BVH.wide, BVH.triangles). */
-static void rs_stream_trace4(const rs_node4 *nodes, const rs_tri *tris, rs_rays *r, int n,
-                             int any_hit, int order, int min_stream, rs_stream_scratch *w,
-                             rs_counters *c)
-{
-    rs_stream_walk(4, nodes, tris, r, n, any_hit, order, min_stream, w, c);
-}
-
-/* rs_stream_walk over the 8-wide tree (BVH.wide8's nodes and groups). */
-static void rs_stream_trace8(const rs_node8 *nodes, const rs_tri8 *groups, rs_rays *r, int n,
-                             int any_hit, int order, int min_stream, rs_stream_scratch *w,
-                             rs_counters *c)
-{
-    rs_stream_walk(8, nodes, groups, r, n, any_hit, order, min_stream, w, c);
+        rs_stream_sync(r, &w->rec[j]);
 }
 
 #endif

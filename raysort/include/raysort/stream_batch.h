@@ -1,0 +1,189 @@
+/* raysort: the `stream` traversal straight from a ray batch, without packets.
+ *
+ * The pipeline's gather lays rays out in sub-packets for the packet traversals,
+ * and its scatter copies their hits back to batch order.  A stream makes its
+ * own copy of every ray (its 64-byte records) and writes every hit back, so for
+ * `stream` both are a second copy of the same data.  rs_stream_batch reads
+ * the batch's ray rows in the sorter's order instead: each chunk of
+ * RS_FRUSTUM_CHUNK rays of a sub-packet is gathered into a scratch of that many
+ * lanes (rs_gather_block: the gather's rules and arithmetic per lane, so the
+ * same values), a coherent chunk takes the frustum walk there, the others'
+ * active rays become stream records, and hits go from the scratch or the
+ * records straight to the batch-order hits.
+ *
+ * Streams, chunks and counters are those of the packet path (stream.pyx's
+ * `trace` over gathered packets): the same rays in the same order, cut at the
+ * same places.  The hits are the same bit for bit.
+ */
+#ifndef RAYSORT_STREAM_BATCH_H
+#define RAYSORT_STREAM_BATCH_H
+
+#include "frustum.h"
+#include "gather.h"
+
+#if defined(_MSC_VER)
+#  define RS_ALIGNED(n) __declspec(align(n))
+#else
+#  define RS_ALIGNED(n) __attribute__((aligned(n)))
+#endif
+
+/* The hits of a batch in batch order: rows t, prim, u, v (a miss: inf, -1, 0,
+ * 0) or, for an any-hit query, one flag per ray (1: occluded). */
+typedef struct rs_batch_hits {
+    float *t;
+    int32_t *prim;
+    float *u, *v;
+    uint8_t *occluded;      /* not NULL: an any-hit query's flags */
+} rs_batch_hits;
+
+/* The result of one call: what the packet path's gather and its check of the
+ * hits report. */
+typedef struct rs_batch_status {
+    int64_t active;         /* rays traced (active and valid) */
+    int64_t bad_ray;        /* the first ray (batch index) that breaks the ray contract, or -1 */
+    int64_t bad_hit;        /* a ray whose hit breaks the hit contract, or -1 */
+    int order_bad;          /* an order entry outside [0, n): nothing more traced */
+} rs_batch_status;
+
+/* Lane j's hit (of the scratch or a one-ray view), t0 its t before the walk, to
+ * ray id of the batch; 1 if it breaks the hit contract (as _checks.pxd's
+ * closest_bad and any_hit_bad: prim -1 or below n_prim; a closest hit in
+ * (tmin, t0) with finite u, v), which the caller reports. */
+RS_INLINE int rs_batch_put(const rs_rays *r, int j, int32_t id, float t0, uint32_t n_prim,
+                           rs_batch_hits *out)
+{
+    const int32_t p = r->prim[j];
+    const int hit = p >= 0;
+    int bad = (uint32_t)(p + 1) > n_prim;
+    if (out->occluded) {
+        out->occluded[id] = (uint8_t)hit;
+        return bad;
+    }
+    const float t = r->t[j], u = r->u[j], v = r->v[j];
+    bad |= hit & (!(r->tmin[j] < t) | !(t < t0) | ((u - u) + (v - v) != 0.0f));
+    out->t[id] = hit ? t : INFINITY;
+    out->prim[id] = hit ? p : -1;
+    out->u[id] = hit ? u : 0.0f;
+    out->v[id] = hit ? v : 0.0f;
+    return bad;
+}
+
+/* The m records of w traced through the tree, their hits to the batch. */
+RS_INLINE void rs_batch_stream(const int width, const void *tree, const void *leaves, int m,
+                               int any_hit, int order, int min_stream, uint32_t n_prim,
+                               rs_stream_scratch *w, rs_batch_hits *out, rs_counters *c,
+                               rs_batch_status *status)
+{
+    rs_rays one;
+    rs_stream_walk(width, tree, leaves, m, any_hit, order, min_stream, w, c);
+    for (int j = 0; j < m; ++j) {
+        rs_stream_ray *x = &w->rec[j];
+        rs_stream_view(x, &one);
+        if (rs_batch_put(&one, 0, x->ray, x->t0, n_prim, out) && status->bad_hit < 0)
+            status->bad_hit = x->ray;
+    }
+}
+
+/* Sub-packets k0 <= k < k1 of the sorter's result (rays order[offsets[k],
+ * offsets[k + 1]) of the batch's ray rows src, n_src rays each) through the
+ * tree, in streams of up to w->size rays; every ray's hit goes to out.  With
+ * `frustum` (8-wide tree only) coherent chunks take the frustum walk
+ * (`stack`: 7 entries per level plus 8). */
+static rs_batch_status rs_stream_batch(const int width, const void *tree, const void *leaves,
+                                       const float *const src[RS_RAY_ROWS], int64_t n_src,
+                                       const int32_t *order, const int32_t *offsets, int k0,
+                                       int k1, int any_hit, int order_kind, int min_stream,
+                                       int frustum, uint32_t n_prim, rs_stream_scratch *w,
+                                       rs_frustum_entry *stack, rs_batch_hits *out,
+                                       rs_counters *c)
+{
+    RS_ALIGNED(64) float rows[RS_PACKET_ROWS][RS_FRUSTUM_CHUNK];
+    RS_ALIGNED(64) int32_t prim[RS_FRUSTUM_CHUNK];
+    RS_ALIGNED(64) float u[RS_FRUSTUM_CHUNK], v[RS_FRUSTUM_CHUNK];
+    int32_t ids[RS_FRUSTUM_CHUNK];
+    float *dst[RS_PACKET_ROWS];
+    rs_rays chunk;
+    rs_frustum_bounds b;
+    RS_ALIGNED(64) float t0[RS_FRUSTUM_CHUNK];
+    rs_batch_status status = {0, -1, -1, 0};
+    int m = 0;
+    for (int a = 0; a < RS_PACKET_ROWS; ++a)
+        dst[a] = rows[a];
+    for (int a = 0; a < 3; ++a) {
+        chunk.o[a] = rows[RS_PACKET_OX + a];
+        chunk.d[a] = rows[RS_PACKET_DX + a];
+        chunk.inv[a] = rows[RS_PACKET_IX + a];
+    }
+    chunk.tmin = rows[RS_PACKET_TMIN];
+    chunk.t = rows[RS_PACKET_T];
+    chunk.prim = prim;
+    chunk.u = u;
+    chunk.v = v;
+    for (int k = k0; k < k1; ++k) {
+        for (int64_t s = offsets[k]; s < offsets[k + 1]; s += RS_FRUSTUM_CHUNK) {
+            const int n = (int)(offsets[k + 1] - s < RS_FRUSTUM_CHUNK ? offsets[k + 1] - s
+                                                                       : RS_FRUSTUM_CHUNK);
+            /* the rows RS_GATHER_AHEAD rays on (as rs_gather_lanes) */
+            for (int q = 0; q < n; q += 16) {
+                int64_t r = s + q + RS_GATHER_AHEAD < n_src ? s + q + RS_GATHER_AHEAD : n_src - 1;
+                for (int a = 0; a < RS_RAY_ROWS; ++a)
+                    rs_prefetch(src[a] + r);
+            }
+            for (int j = 0; j < RS_FRUSTUM_CHUNK; ++j) {
+                int32_t id = j < n ? order[s + j] : -1;
+                if (j < n && (uint32_t)id >= (uint64_t)n_src) {
+                    status.order_bad = 1;
+                    return status;
+                }
+                ids[j] = id;
+            }
+            for (int j = 0; j < RS_FRUSTUM_CHUNK; j += RS_SW) {
+                int bits = rs_gather_block(dst, prim, u, v, NULL, src, ids, j);
+                if (bits && status.bad_ray < 0)
+                    status.bad_ray = ids[j + rs_lowest(bits)];
+            }
+            const int active = rs_frustum_bounds_of(&chunk, 0, n, &b);
+            status.active += active;
+            if (frustum && active && rs_frustum_coherent(&b)) {
+                memcpy(t0, chunk.t, sizeof t0);
+                rs_frustum_walk((const rs_node8 *)tree, (const rs_tri8 *)leaves, &chunk, 0, n,
+                                any_hit, &b, stack, c);
+                for (int j = 0; j < n; ++j)
+                    if (rs_batch_put(&chunk, j, ids[j], t0[j], n_prim, out)
+                            && status.bad_hit < 0)
+                        status.bad_hit = ids[j];
+                continue;
+            }
+            for (int j = 0; j < n; ++j) {
+                if (!(chunk.tmin[j] < chunk.t[j])) {    /* not traced: a miss */
+                    rs_batch_put(&chunk, j, ids[j], chunk.t[j], n_prim, out);
+                    continue;
+                }
+                rs_stream_ray *x = &w->rec[m];
+                for (int a = 0; a < 3; ++a) {
+                    x->o[a] = chunk.o[a][j];
+                    x->inv[a] = chunk.inv[a][j];
+                    x->d[a] = chunk.d[a][j];
+                }
+                x->tmin = chunk.tmin[j];
+                x->t = chunk.t[j];
+                x->prim = -1;
+                x->u = x->v = 0.0f;
+                x->ray = ids[j];
+                x->t0 = x->t;
+                w->ids[m] = m;
+                if (++m == w->size) {
+                    rs_batch_stream(width, tree, leaves, m, any_hit, order_kind, min_stream,
+                                    n_prim, w, out, c, &status);
+                    m = 0;
+                }
+            }
+        }
+    }
+    if (m)
+        rs_batch_stream(width, tree, leaves, m, any_hit, order_kind, min_stream, n_prim, w,
+                        out, c, &status);
+    return status;
+}
+
+#endif
