@@ -453,9 +453,10 @@ class Pipeline:
             return result, time.thread_time() - start
 
         m = len(offsets) - 1
-        cuts = np.linspace(0, m, max(1, min(threads, m)) + 1).astype(int)
-        if len(cuts) > 2:
-            with ThreadPoolExecutor(max_workers=len(cuts) - 1) as pool:
+        workers = max(1, min(threads, m))
+        if workers > 1:
+            cuts = [m * j // workers for j in range(workers + 1)]
+            with ThreadPoolExecutor(max_workers=workers) as pool:
                 parts = list(pool.map(run, cuts[:-1], cuts[1:]))
             if timings is not None:     # the workers' CPU time: the caller only waited
                 timings["traverse"] = (timings.get("traverse", 0.0)

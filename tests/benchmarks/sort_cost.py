@@ -29,24 +29,35 @@ import time
 
 import numpy as np
 
-from raysort import registry
+from raysort import isa, registry
 from raysort.bench.report import load_average, machine_info
 from raysort.bench.rounds import run_rounds, summary
-from raysort.rays import gather_checked, scatter
+from raysort.rays import MAX_PACKET, Hits, gather_checked, scatter
 from raysort.scene import load_scene
 from raysort.workloads import workload
 
 BUDGET = 0.10
 
 
+def reads_batch(traversal):
+    """Whether the pipeline lets this traversal read the batch itself (no gather)."""
+    return hasattr(traversal, "_intersect_batch")
+
+
 class Config:
     """One sorter and one traversal on one workload: each call sorts, gathers and traces once,
-    keeps the three thread-CPU times and returns the trace's."""
+    keeps the three thread-CPU times and returns the trace's.
 
-    def __init__(self, sorter, traversal, bvh, work):
-        self.sorter_name, self.traversal_name = sorter, traversal
+    A traversal that reads the batch itself (``stream``) takes the pipeline's path unless
+    ``packets``: the "gather" is then the check of the sorter's result that the pipeline runs
+    instead (the traversal copies each ray into its records itself, in the trace)."""
+
+    def __init__(self, sorter, traversal, bvh, work, packets=False):
         self.sorter = registry.create("sorters", sorter)
         self.traversal = registry.create("traversals", traversal)
+        self.batch = reads_batch(self.traversal) and not packets
+        self.sorter_name = sorter
+        self.traversal_name = traversal + (" (batch)" if self.batch else "")
         self.bvh, self.work = bvh, work
         self.sort, self.gather, self.trace = [], [], []
         self.hits = None
@@ -54,17 +65,27 @@ class Config:
     def __call__(self):
         w = self.work
         packets_in, bounds = w.packets.copy(), self.bvh.bounds.copy()
+        out = np.empty((4, len(w)), np.float32)
         t0 = time.thread_time()
         order, offsets = self.sorter.sort(w.rays, packets_in, bounds)
         t1 = time.thread_time()
-        packets = gather_checked(w.rays, order, offsets, w.packets)[0]
-        t2 = time.thread_time()
-        self.traversal.intersect(self.bvh, packets, any_hit=False)
-        t3 = time.thread_time()
+        if self.batch:
+            assert isa.module("_contract").sort_result(order, offsets, w.packets, len(w),
+                                                       MAX_PACKET)[0] == 0
+            t2 = time.thread_time()
+            self.traversal._intersect_batch(self.bvh, w.rays.data, order, offsets, 0,
+                                            len(offsets) - 1, False, out)
+            t3 = time.thread_time()
+            self.hits = Hits._of_block(out)
+        else:
+            packets = gather_checked(w.rays, order, offsets, w.packets)[0]
+            t2 = time.thread_time()
+            self.traversal.intersect(self.bvh, packets, any_hit=False)
+            t3 = time.thread_time()
+            self.hits = scatter(packets, len(w))
         self.sort.append(t1 - t0)
         self.gather.append(t2 - t1)
         self.trace.append(t3 - t2)
-        self.hits = scatter(packets, len(w))
         return t3 - t2
 
     def row(self, rounds):
@@ -88,10 +109,11 @@ def spread_pct(s):
     return f"{100 * s['median']:5.1f} % [{100 * s['min']:.1f}-{100 * s['max']:.1f}]"
 
 
-def markdown(scene, rows, traversals):
+def markdown(scene, rows):
     """One scene's rows as a Markdown table: a row per sorter, the sort and gather medians
     (of the first traversal's rounds) and the median share [min-max] per traversal."""
     by = {(r["sorter"], r["traversal"]): r for r in rows}
+    traversals = list(dict.fromkeys(r["traversal"] for r in rows))
     sorters = list(dict.fromkeys(r["sorter"] for r in rows))
     head = ["sorter", "sort ms", "gather ms"] + [f"{t} ms" for t in traversals] + \
         [f"share vs {t}" for t in traversals]
@@ -140,6 +162,9 @@ def main(argv=None):
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--json", default=None, help="also write the results here")
     parser.add_argument("--markdown", action="store_true", help="also print Markdown tables")
+    parser.add_argument("--packets", action="store_true",
+                        help="also run traversals that read the batch (stream) through "
+                             "gathered packets, as before they could")
     parser.add_argument("--medians", nargs="+", metavar="JSON",
                         help="only summarise these --json files (see the module docstring)")
     args = parser.parse_args(argv)
@@ -160,7 +185,9 @@ def main(argv=None):
         scene = load_scene(spec)
         bvh = scene.bvh()
         work = workload(scene, "diffuse", width=args.size, height=args.size, seed=args.seed)
-        configs = [Config(s, t, bvh, work) for s in sorters for t in traversals]
+        configs = [Config(s, t, bvh, work, packets) for s in sorters for t in traversals
+                   for packets in ((False, True) if args.packets else (False,))
+                   if not packets or reads_batch(registry.create("traversals", t))]
         run_rounds(configs, args.rounds, seed=j)
         rows = [c.row(args.rounds) for c in configs]
         for c, r in zip(configs, rows):
@@ -183,7 +210,7 @@ def main(argv=None):
     print(f"\nload after: {report['load']['after']}")
     if args.markdown:
         for name, scene in report["scenes"].items():
-            print("\n" + markdown(name, scene["rows"], traversals))
+            print("\n" + markdown(name, scene["rows"]))
     if args.json:
         with open(args.json, "w", encoding="utf-8") as fh:
             json.dump(report, fh, indent=1)
