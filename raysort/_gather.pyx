@@ -345,23 +345,35 @@ def add_unoccluded(double[:, ::1] radiance, const int32_t[::1] slot,
     (what ``np.add.at`` does, without its per-element overhead).  An occluded ray adds
     -0.0, which leaves every float as it is (even -0.0), so the loop has no branch for
     a test that goes either way at random."""
-    cdef Py_ssize_t i, n = slot.shape[0]
-    cdef int c
+    cdef Py_ssize_t i, n = slot.shape[0], rows = radiance.shape[0], step
+    cdef int bad = 0
     cdef bint lit
     cdef double *row
+    cdef const float *c0
+    cdef const float *c1
+    cdef const float *c2
     if contribution.shape[0] != 3 or contribution.shape[1] != n or occluded.shape[0] != n \
             or radiance.shape[1] != 3:
         raise ValueError("add_unoccluded: radiance (k, 3), slot (n,), contribution (3, n) and "
                          "occluded (n,) expected")
-    for i in range(n):
-        if not 0 <= slot[i] < radiance.shape[0]:
-            raise IndexError(f"add_unoccluded: slot[{i}] = {slot[i]} is out of range")
+    if n == 0:
+        return
+    with nogil:
+        for i in range(n):
+            bad |= <uint32_t> slot[i] >= <uint32_t> rows
+    if bad:
+        for i in range(n):
+            if not 0 <= slot[i] < rows:
+                raise IndexError(f"add_unoccluded: slot[{i}] = {slot[i]} is out of range")
+    step = contribution.strides[1] // sizeof(float)
+    c0, c1, c2 = &contribution[0, 0], &contribution[1, 0], &contribution[2, 0]
     with nogil:
         for i in range(n):
             lit = occluded[i] == 0
-            row = &radiance[slot[i], 0]
-            for c in range(3):
-                row[c] += contribution[c, i] if lit else -0.0
+            row = &radiance[0, 0] + 3 * slot[i]
+            row[0] += c0[i * step] if lit else -0.0
+            row[1] += c1[i * step] if lit else -0.0
+            row[2] += c2[i * step] if lit else -0.0
 
 
 def compiled_isa():
