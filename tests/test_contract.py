@@ -359,6 +359,20 @@ def test_stream_reading_the_batch_checks_the_sorter(monkeypatch, sorter, broken,
     assert (info.value.kind, info.value.name) == ("sorters", sorter)
 
 
+def _offsets_beyond(self, rays, packets, bounds):
+    return np.arange(len(rays), dtype=np.int32), np.array([0, len(rays) + 64], np.int32)
+
+
+def test_stream_reading_the_batch_refuses_a_trusted_sorters_bad_offsets(monkeypatch):
+    """With check_plugins=False a trusted sorter's result is not checked, but offsets
+    beyond the batch still stop ``stream`` before it reads there, and the sorter is named."""
+    pipe = raysort.Pipeline("plane", traversal="stream", check_plugins=False)
+    monkeypatch.setattr(NoneSorter, "sort", _offsets_beyond)
+    with pytest.raises(PluginContractError) as info:
+        pipe.render(8, 8, 1)
+    assert (info.value.kind, info.value.name) == ("sorters", "none")
+
+
 @pytest.mark.parametrize("check_plugins", [True, False])
 def test_stream_reading_the_batch_reports_a_hit_it_flags(monkeypatch, check_plugins):
     """A hit that ``stream``'s kernel flags as it writes it (the rules of check_hits, on

@@ -16,6 +16,11 @@ for the whole stream, and the lanes are always full whatever the rays'
 directions, which is what the paper gains on incoherent rays.  The kernel is
 ``raysort/include/raysort/stream.h``.
 
+In a render (and ``Pipeline.trace``) the pipeline skips its gather and scatter for
+``stream``: ``_intersect_batch`` (:func:`trace_batch`, ``stream_batch.h``) reads the
+batch's rows in the sorter's order straight into the records and writes each hit in
+batch order, with the same streams, counters and hits as ``intersect`` on packets.
+
 The stream is the whole traversal call, not one sub-packet: every active ray
 of every sub-packet passed to ``intersect`` (the pipeline passes a whole
 batch, ``batch_rays`` rays, per thread), in the sorter's order, cut into
@@ -25,8 +30,9 @@ so streams stay large deeper in the tree).
 """
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.stdlib cimport malloc, free
+from raysort._checks cimport offsets_bad
 from raysort._types cimport (rs_node4, rs_node8, rs_tri, rs_tri8, rs_rays, rs_counters, rays_view,
-                             RS_RAY_ROWS)
+                             RS_MAX_PACKET, RS_RAY_ROWS)
 
 import numpy as np
 
@@ -200,7 +206,8 @@ def trace_batch(bvh, const float[:, ::1] src, const int32_t[::1] order,
     Returns ``(Counters, bad_ray, bad_hit, order_ok)``: ``bad_ray`` as the gather's (a
     ray that breaks the ray contract, or -1); ``bad_hit`` a ray whose hit breaks the hit
     contract (the rules of :func:`raysort.contract.check_hits`), or -1; ``order_ok``
-    False at an order entry outside ``[0, n)`` (nothing more is traced)."""
+    False when ``offsets`` do not run from 0 to n in sub-packets of 1..RS_MAX_PACKET
+    rays or at an order entry outside ``[0, n)`` (nothing more is traced)."""
     cdef Py_ssize_t n = order.shape[0]
     cdef float[:, ::1] block
     cdef uint8_t[::1] flags
@@ -239,6 +246,8 @@ def trace_batch(bvh, const float[:, ::1] src, const int32_t[::1] order,
     c.rays = c.ia = c.box1 = c.box4 = c.tri1 = c.tri4 = c.stream_tasks = c.stream_rays = 0
     if len(bvh.triangles) == 0:
         raise ValueError("trace_batch: the scene has no triangles (trace its packets instead)")
+    if offsets_bad(&offsets[0], offsets.shape[0] - 1, <int32_t> n, RS_MAX_PACKET):
+        return Counters(), -1, -1, False    # never read beyond the order, whoever sorted
     size = <int> min(stream_size, offsets[k1] - offsets[k0])
     if size < 1:
         return Counters(), -1, -1, True

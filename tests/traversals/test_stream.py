@@ -191,17 +191,25 @@ def test_reading_the_batch_traces_invalid_rays_as_misses(each_isa, soup):
 
 
 def test_reading_the_batch_refuses_an_order_beyond_the_rays(soup):
-    """An order entry outside [0, n) stops the call (order_ok False) before any read."""
+    """An order entry outside [0, n), or offsets that do not cut [0, n) into sub-packets
+    of 1..MAX_PACKET rays, stop the call (order_ok False) before any read beyond them."""
     V, F, bvh, rays, ref = soup
+    n = len(rays)
     traversal = raysort.create("traversals", "stream")
-    for wrong in (len(rays), -1, 2**31 - 1):
-        order = np.arange(len(rays), dtype=np.int32)
-        order[100] = wrong
-        out = np.empty((4, len(rays)), np.float32)
-        *_, order_ok = traversal._intersect_batch(bvh, rays.data, order,
-                                                  np.array([0, len(rays)], np.int32), 0, 1,
-                                                  False, out)
-        assert not order_ok
+    cases = [(wrong, np.array([0, 1000, 2000, n], np.int32))
+             for wrong in (n, -1, 2**31 - 1)]
+    cases += [(None, np.array(offsets, np.int32)) for offsets in
+              ([0, 1000, n + 5000], [0, 2000, 1000, n], [-4000, 0, n], [0, 1000, 1000, n],
+               [0, 1000, 2000])]
+    for wrong, offsets in cases:
+        order = np.arange(n, dtype=np.int32)
+        if wrong is not None:
+            order[100] = wrong
+        out = np.empty((4, n), np.float32)
+        for k0, k1 in ((0, len(offsets) - 1), (1, len(offsets) - 1)):
+            *_, order_ok = traversal._intersect_batch(bvh, rays.data, order, offsets, k0,
+                                                      k1, False, out)
+            assert not order_ok or (wrong is not None and k0 == 1), (wrong, offsets, k0)
 
 
 def test_reading_the_batch_flags_a_hit_beyond_the_mesh(soup):
