@@ -332,6 +332,7 @@ def batch_hit_fault(plugin, rays, hits, n_prim, ray):
     fail(f"ray {ray}: a hit with u = {hits.u[ray]}, v = {hits.v[ray]} (must be finite), or "
          f"a hit of an invalid ray")
 
+
 def check_packet_arrays(plugin, packets, arrays):
     """A traversal left ``packets`` holding the ``arrays`` it was given
     (:func:`packet_arrays`), unchanged in shape and type."""

@@ -446,26 +446,14 @@ class Pipeline:
         clock.lap("check")
 
         def run(k0, k1):
-            start = time.thread_time()
-            result = contract.call_plugin("traversals", self.traversal, "_intersect_batch",
-                                          self.bvh, rays.data, order, offsets, k0, k1,
-                                          any_hit, out)
-            return result, time.thread_time() - start
+            return contract.call_plugin("traversals", self.traversal, "_intersect_batch",
+                                        self.bvh, rays.data, order, offsets, k0, k1, any_hit,
+                                        out)
 
-        m = len(offsets) - 1
-        workers = max(1, min(threads, m))
-        if workers > 1:
-            cuts = [m * j // workers for j in range(workers + 1)]
-            with ThreadPoolExecutor(max_workers=workers) as pool:
-                parts = list(pool.map(run, cuts[:-1], cuts[1:]))
-            if timings is not None:     # the workers' CPU time: the caller only waited
-                timings["traverse"] = (timings.get("traverse", 0.0)
-                                       + sum(seconds for _, seconds in parts))
-        else:
-            parts = [run(0, m)]
+        parts = _in_threads(run, len(offsets) - 1, threads, timings)
         hits = out.view(bool) if any_hit else Hits._of_block(out)
         counters, bad = Counters(), []
-        for (part, bad_ray, bad_hit, order_ok), _ in parts:
+        for part, bad_ray, bad_hit, order_ok in parts:
             if not order_ok:                    # an entry outside [0, n)
                 return None, None, -1
             if bad_hit >= 0:
@@ -474,31 +462,17 @@ class Pipeline:
             counters += contract.check_counters(self.traversal, part)
             if bad_ray >= 0:
                 bad.append(bad_ray)
-        clock.lap("traverse" if len(parts) == 1 else None)
+        clock.lap("traverse")
         return hits, counters, min(bad, default=-1)
 
     def _intersect(self, batch, any_hit, threads=1, timings=None):
-        def run(part):
+        def run(k0, k1):
+            part = batch if (k0, k1) == (0, batch.n_packets) else batch.slice(k0, k1)
             return contract.call_plugin("traversals", self.traversal, "intersect", self.bvh,
                                         part, any_hit)
 
-        def run_timed(part):
-            start = time.thread_time()
-            return run(part), time.thread_time() - start
-
-        if threads > 1 and batch.n_packets > 1:
-            cuts = np.linspace(0, batch.n_packets, min(threads, batch.n_packets) + 1).astype(int)
-            with ThreadPoolExecutor(max_workers=len(cuts) - 1) as pool:
-                timed = list(pool.map(lambda ab: run_timed(batch.slice(*ab)),
-                                      zip(cuts[:-1], cuts[1:])))
-            parts = [counters for counters, _ in timed]
-            if timings is not None:     # the workers' CPU time: the caller only waited
-                timings["traverse"] = (timings.get("traverse", 0.0)
-                                       + sum(seconds for _, seconds in timed))
-        else:
-            parts = [run(batch)]
         total = Counters()
-        for counters in parts:
+        for counters in _in_threads(run, batch.n_packets, threads, timings):
             total += contract.check_counters(self.traversal, counters)
         return total
 
@@ -698,6 +672,26 @@ class Pipeline:
         clock = _Clock(stats.stage_seconds)
         add_unoccluded(radiance, shadow.slot, shadow.contribution, occluded)
         clock.lap("shade")
+
+
+def _in_threads(run, m, threads, timings):
+    """``[run(k0, k1), ...]`` over ``[0, m)`` (sub-packets) cut into ``threads`` parts, run
+    in that many threads (one part, in this thread, when ``threads`` or ``m`` is 1).  The
+    workers' thread CPU is added to ``timings["traverse"]`` (the caller only waited)."""
+    workers = max(1, min(threads, m))
+    if workers == 1:
+        return [run(0, m)]
+
+    def timed(k0, k1):
+        start = time.thread_time()
+        return run(k0, k1), time.thread_time() - start
+
+    cuts = [m * j // workers for j in range(workers + 1)]
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        results = list(pool.map(timed, cuts[:-1], cuts[1:]))
+    if timings is not None:
+        timings["traverse"] = timings.get("traverse", 0.0) + sum(s for _, s in results)
+    return [result for result, _ in results]
 
 
 def default_traversal():
