@@ -195,9 +195,10 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
 def trace_batch(bvh, const float[:, ::1] src, const int32_t[::1] order,
                 const int32_t[::1] offsets, int k0, int k1, bint any_hit, out, int stream_size,
                 int order_kind, int min_stream, int width, bint frustum=False):
-    """Sub-packets ``k0 <= k < k1`` of a sorter's result (``order``, ``offsets``, both
-    checked by the caller but for the range of ``order``) straight from the batch's
-    ray rows ``src`` (``RayBatch.data``), without packets: their hits to ``out``,
+    """Sub-packets ``k0 <= k < k1`` of a sorter's result (``order``, ``offsets``: the
+    offsets and the range of the order are checked here, that the order is a permutation
+    keeping to the large packets by the caller) straight from the batch's ray rows
+    ``src`` (``RayBatch.data``), without packets: their hits to ``out``,
     a float32 (4, n) block (rows t, prim as int32 bits, u, v) or, with ``any_hit``,
     a uint8 (n,) array (1: occluded).  The rays get the gather's rules (a ray that
     breaks the ray contract is traced as a miss) and the streams, chunks, counters and
@@ -238,14 +239,14 @@ def trace_batch(bvh, const float[:, ::1] src, const int32_t[::1] order,
         prim = out[1].view(np.int32)
         hits.occluded = NULL
         hits.t, hits.prim, hits.u, hits.v = &block[0, 0], &prim[0], &block[2, 0], &block[3, 0]
+    if len(bvh.triangles) == 0:
+        raise ValueError("trace_batch: the scene has no triangles (trace its packets instead)")
     for a in range(RS_RAY_ROWS):
         rows[a] = &src[a, 0]
     node_array, leaf_array, depth = _tree(bvh, width)
     cdef const uint8_t[::1] node_bytes = node_array.view("u1").reshape(-1)
     cdef const uint8_t[::1] leaf_bytes = leaf_array.view("u1").reshape(-1)
     c.rays = c.ia = c.box1 = c.box4 = c.tri1 = c.tri4 = c.stream_tasks = c.stream_rays = 0
-    if len(bvh.triangles) == 0:
-        raise ValueError("trace_batch: the scene has no triangles (trace its packets instead)")
     if offsets_bad(&offsets[0], offsets.shape[0] - 1, <int32_t> n, RS_MAX_PACKET):
         return Counters(), -1, -1, False    # never read beyond the order, whoever sorted
     size = <int> min(stream_size, offsets[k1] - offsets[k0])
