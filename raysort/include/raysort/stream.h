@@ -500,24 +500,29 @@ RS_INLINE void rs_stream_single8(const rs_node8 *nodes, const rs_tri8 *groups, r
 /* The traversal of one stream                                              */
 /* ------------------------------------------------------------------------ */
 
+/* Lane i of r into the record x of ray `ray` (its index in whatever r was gathered
+ * from), its hit so far included. */
+RS_INLINE void rs_stream_record(const rs_rays *r, int i, int32_t ray, rs_stream_ray *x)
+{
+    for (int a = 0; a < 3; ++a) {
+        x->o[a] = r->o[a][i];
+        x->inv[a] = r->inv[a][i];
+        x->d[a] = r->d[a][i];
+    }
+    x->tmin = r->tmin[i];
+    x->t = r->t[i];
+    x->prim = r->prim[i];
+    x->u = r->u[i];
+    x->v = r->v[i];
+    x->ray = ray;
+    x->t0 = x->t;
+}
+
 /* Copy rays ids[0, n) into the records rec[0, n) and make ids[j] = j. */
 RS_INLINE void rs_stream_records(const rs_rays *r, int32_t *ids, int n, rs_stream_ray *rec)
 {
     for (int j = 0; j < n; ++j) {
-        int32_t i = ids[j];
-        rs_stream_ray *x = &rec[j];
-        for (int a = 0; a < 3; ++a) {
-            x->o[a] = r->o[a][i];
-            x->inv[a] = r->inv[a][i];
-            x->d[a] = r->d[a][i];
-        }
-        x->tmin = r->tmin[i];
-        x->t = r->t[i];
-        x->prim = r->prim[i];
-        x->u = r->u[i];
-        x->v = r->v[i];
-        x->ray = i;
-        x->t0 = x->t;
+        rs_stream_record(r, ids[j], ids[j], &rec[j]);
         ids[j] = j;
     }
 }

@@ -159,18 +159,7 @@ static rs_batch_status rs_stream_batch(const int width, const void *tree, const 
                     rs_batch_put(&chunk, j, ids[j], chunk.t[j], n_prim, out);
                     continue;
                 }
-                rs_stream_ray *x = &w->rec[m];
-                for (int a = 0; a < 3; ++a) {
-                    x->o[a] = chunk.o[a][j];
-                    x->inv[a] = chunk.inv[a][j];
-                    x->d[a] = chunk.d[a][j];
-                }
-                x->tmin = chunk.tmin[j];
-                x->t = chunk.t[j];
-                x->prim = -1;
-                x->u = x->v = 0.0f;
-                x->ray = ids[j];
-                x->t0 = x->t;
+                rs_stream_record(&chunk, j, ids[j], &w->rec[m]);   /* prim -1, u, v 0 */
                 w->ids[m] = m;
                 if (++m == w->size) {
                     rs_batch_stream(width, tree, leaves, m, any_hit, order_kind, min_stream,
