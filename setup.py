@@ -9,7 +9,9 @@ baseline build *is* the ``sse2`` ISA.
 
 Environment switches (read at build time):
   RAYSORT_BUILD_ISAS=scalar,avx2   which extra ISAs to build (default: every one
-                                   the compiler supports; "none" for none)
+                                   the compiler supports but avx512emu; "none" for
+                                   none; avx512emu, for tests only, is built only
+                                   when named)
   RAYSORT_DEBUG_CYTHON=1           turn Cython bounds checking on
 """
 import os
@@ -68,7 +70,12 @@ ISAS = {
     "avx2": ([], ["/arch:AVX2"] if MSVC else ["-mavx2"]),
     "avx512": ([], ["/arch:AVX512"] if MSVC else
                ["-mavx512f", "-mavx512vl", "-mavx512bw", "-mavx512dq"]),
+    # the avx512 build's code for an AVX2 CPU, its AVX-512 intrinsics emulated in C
+    # (raysort/include/raysort/avx512_emu.h): slow, for testing that code where no CPU
+    # runs AVX-512; built only when RAYSORT_BUILD_ISAS names it
+    "avx512emu": ([("RAYSORT_EMULATE_AVX512", "1")], ["/arch:AVX2"] if MSVC else ["-mavx2"]),
 }
+ON_REQUEST = {"avx512emu"}
 
 
 def _compiler_accepts(flags):
@@ -91,7 +98,7 @@ def _selected_isas():
     wanted = os.environ.get("RAYSORT_BUILD_ISAS", "").strip().lower()
     if not X86 or wanted == "none":     # off x86 the baseline is the scalar path
         return []
-    names = list(ISAS) if not wanted or wanted == "all" else \
+    names = [n for n in ISAS if n not in ON_REQUEST] if not wanted or wanted == "all" else \
         [n.strip() for n in wanted.split(",") if n.strip() and n.strip() != "sse2"]
     unknown = sorted(set(names) - set(ISAS))
     if unknown:

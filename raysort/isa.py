@@ -10,6 +10,12 @@ per lane (no FMA contraction), so hits and images are bit-identical whichever
 runs.  ``RAYSORT_ISA=scalar|sse2|avx2|avx512`` forces one; asking for an ISA
 that is not compiled or not supported is a ConfigError.
 
+``avx512emu`` is for tests only, and built only on request
+(``RAYSORT_BUILD_ISAS=avx512emu``): the avx512 build's 16-lane code compiled for
+an AVX2 CPU, with its AVX-512 intrinsics emulated lane by lane in C
+(``raysort/include/raysort/avx512_emu.h``), so that the suite can check that code
+where no CPU runs AVX-512.  It is slow and never chosen unless asked for.
+
 Framework code and plugins call a kernel through :func:`module`::
 
     isa.module("traversals.single").trace(bvh, packets, any_hit)
@@ -29,9 +35,11 @@ __all__ = ["ISAS", "baseline", "compiled", "supported", "available", "active", "
            "module", "info"]
 
 #: every ISA raysort knows, lowest first
-ISAS = ("scalar", "sse2", "avx2", "avx512")
+ISAS = ("scalar", "sse2", "avx2", "avx512", "avx512emu")
 _NEEDS = {"scalar": (), "sse2": ("sse2",), "avx2": ("avx2",),
-          "avx512": ("avx512f", "avx512vl", "avx512bw", "avx512dq")}
+          "avx512": ("avx512f", "avx512vl", "avx512bw", "avx512dq"), "avx512emu": ("avx2",)}
+#: ISAs for tests, never chosen by default
+EMULATED = ("avx512emu",)
 _X86 = platform.machine().lower() in ("x86_64", "amd64", "i386", "i686", "x86")
 #: a kernel module every ISA build holds (its presence says the ISA was built)
 _PROBE = "_gather"
@@ -87,7 +95,8 @@ def _check(isa, source):
 
 
 def active():
-    """The ISA whose kernels run now: ``RAYSORT_ISA`` if set, else the best available."""
+    """The ISA whose kernels run now: ``RAYSORT_ISA`` if set, else the best available
+    (an emulated one only if asked for)."""
     global _active
     if _active is None:
         with _lock:
@@ -97,7 +106,7 @@ def active():
                     _check(forced, "RAYSORT_ISA")
                     _active = forced
                 else:
-                    _active = available()[-1]
+                    _active = [i for i in available() if i not in EMULATED][-1]
     return _active
 
 

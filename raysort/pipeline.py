@@ -698,7 +698,7 @@ def default_traversal():
     """The fastest exact traversal measured for the active ISA: ``stream`` where a
     stream test covers 8 or 16 rays (AVX2, AVX-512), ``wide8`` on SSE2 and the scalar
     build, where ``stream`` is slower (BENCHMARKS.md §7).  Images do not depend on it."""
-    return "stream" if isa.active() in ("avx2", "avx512") else "wide8"
+    return "stream" if isa.active() in ("avx2", "avx512", "avx512emu") else "wide8"
 
 
 def _both(first, second):

@@ -27,7 +27,21 @@ def _builtin(kind):
 def test_the_best_available_isa_is_active_by_default():
     if os.environ.get("RAYSORT_ISA"):
         pytest.skip("RAYSORT_ISA forces the ISA")
-    assert isa.active() == AVAILABLE[-1]
+    assert isa.active() == [i for i in AVAILABLE if i not in isa.EMULATED][-1]
+
+
+def test_an_emulated_isa_runs_only_when_asked_for():
+    """``avx512emu`` (tests only) is known, needs AVX2, is never the default and, where
+    it is built and runs, reports itself from its kernels."""
+    assert "avx512emu" in isa.ISAS and "avx512emu" in isa.EMULATED
+    assert isa.active() not in isa.EMULATED or os.environ.get("RAYSORT_ISA")
+    if "avx512emu" not in AVAILABLE:
+        pytest.skip("avx512emu is not built (RAYSORT_BUILD_ISAS=avx512emu) or needs AVX2")
+    previous = isa.use("avx512emu")
+    try:
+        assert isa.module("_gather").compiled_isa() == "avx512emu"
+    finally:
+        isa.use(previous)
 
 
 def test_baseline_is_always_available():

@@ -43,7 +43,12 @@
 #else
 #  define RS_ISA_AVX2 0
 #endif
-#if RS_ISA_AVX2 && defined(__AVX512F__) && defined(__AVX512VL__) && defined(__AVX512BW__) \
+#if RS_ISA_AVX2 && defined(RAYSORT_EMULATE_AVX512)
+/* the avx512 code on an AVX2 CPU, its AVX-512 intrinsics emulated (tests only) */
+#  define RS_ISA_AVX512 1
+#  define RS_ISA_NAME "avx512emu"
+#  include "avx512_emu.h"
+#elif RS_ISA_AVX2 && defined(__AVX512F__) && defined(__AVX512VL__) && defined(__AVX512BW__) \
     && defined(__AVX512DQ__)
 #  define RS_ISA_AVX512 1
 #  define RS_ISA_NAME "avx512"

@@ -1,0 +1,216 @@
+/* raysort: the AVX-512 intrinsics raysort uses, emulated lane by lane in C.
+ *
+ * For the `avx512emu` ISA only (setup.py builds it on request:
+ * RAYSORT_BUILD_ISAS=avx512emu): the avx512 build's hand-written 16-lane code
+ * (lanes.h, wide16.h) compiled for a CPU without AVX-512, so that the test suite
+ * can run it, lane masks, gathers and compression included, where no CPU runs
+ * AVX-512 (no emulator of ours can run the real instructions: QEMU's cannot).  It
+ * is slow and never chosen by default; it tests the code, not the hardware.
+ *
+ * Each operation follows the Intel SDM's pseudo-code for its instruction, with
+ * the same IEEE single-precision operation per lane (the build keeps contraction
+ * off): MINPS/MAXPS return the second operand when either is NaN or both are
+ * zeros, the _OQ predicates are false on NaN and _NEQ_UQ true, a gather reads
+ * base + index * scale bytes, and compression packs the selected lanes at the
+ * bottom in lane order and zeroes the rest.  simd.h includes this file after
+ * <immintrin.h> and before anything that uses the names, which the macros below
+ * then send here.  An aligned load of an address that is not aligned, or a
+ * predicate this file does not know, traps (SIGILL), as the instruction would fault.
+ */
+#ifndef RAYSORT_AVX512_EMU_H
+#define RAYSORT_AVX512_EMU_H
+
+#include <stdint.h>
+#include <string.h>
+
+typedef struct { float f[16]; } rs_emu_m512;
+typedef struct { int32_t i[16]; } rs_emu_m512i;
+typedef uint16_t rs_emu_mask16;
+
+#define RS_EMU static inline
+
+#define RS_EMU_MAP_F(name, expr)                                                    \
+    RS_EMU rs_emu_m512 name(rs_emu_m512 a, rs_emu_m512 b)                          \
+    {                                                                               \
+        rs_emu_m512 r;                                                              \
+        for (int j = 0; j < 16; ++j) {                                              \
+            float x = a.f[j], y = b.f[j];                                           \
+            r.f[j] = (expr);                                                        \
+        }                                                                           \
+        return r;                                                                   \
+    }
+RS_EMU_MAP_F(rs_emu_add_ps, x + y)
+RS_EMU_MAP_F(rs_emu_sub_ps, x - y)
+RS_EMU_MAP_F(rs_emu_mul_ps, x * y)
+RS_EMU_MAP_F(rs_emu_div_ps, x / y)
+RS_EMU_MAP_F(rs_emu_min_ps, x < y ? x : y)
+RS_EMU_MAP_F(rs_emu_max_ps, x > y ? x : y)
+#undef RS_EMU_MAP_F
+
+RS_EMU rs_emu_m512 rs_emu_set1_ps(float a)
+{
+    rs_emu_m512 r;
+    for (int j = 0; j < 16; ++j)
+        r.f[j] = a;
+    return r;
+}
+RS_EMU rs_emu_m512i rs_emu_set1_epi32(int32_t a)
+{
+    rs_emu_m512i r;
+    for (int j = 0; j < 16; ++j)
+        r.i[j] = a;
+    return r;
+}
+RS_EMU rs_emu_m512 rs_emu_loadu_ps(const void *p)
+{
+    rs_emu_m512 r;
+    memcpy(r.f, p, sizeof r.f);
+    return r;
+}
+RS_EMU rs_emu_m512i rs_emu_loadu_si512(const void *p)
+{
+    rs_emu_m512i r;
+    memcpy(r.i, p, sizeof r.i);
+    return r;
+}
+/* VMOVAPS faults on an address that is not 64-byte aligned; so does this */
+RS_EMU rs_emu_m512 rs_emu_load_ps(const void *p)
+{
+    if ((uintptr_t)p & 63)
+        __builtin_trap();
+    return rs_emu_loadu_ps(p);
+}
+RS_EMU void rs_emu_storeu_ps(void *p, rs_emu_m512 a) { memcpy(p, a.f, sizeof a.f); }
+RS_EMU void rs_emu_storeu_si512(void *p, rs_emu_m512i a) { memcpy(p, a.i, sizeof a.i); }
+RS_EMU rs_emu_m512i rs_emu_castps_si512(rs_emu_m512 a)
+{
+    rs_emu_m512i r;
+    memcpy(r.i, a.f, sizeof r.i);
+    return r;
+}
+
+/* the predicates raysort uses (_CMP_* from <immintrin.h>) */
+RS_EMU rs_emu_mask16 rs_emu_cmp_ps_mask(rs_emu_m512 a, rs_emu_m512 b, int predicate)
+{
+    unsigned bits = 0;
+    for (int j = 0; j < 16; ++j) {
+        float x = a.f[j], y = b.f[j];
+        int set;
+        switch (predicate) {
+        case _CMP_LT_OQ: set = x < y; break;
+        case _CMP_LE_OQ: set = x <= y; break;
+        case _CMP_GT_OQ: set = x > y; break;
+        case _CMP_GE_OQ: set = x >= y; break;
+        case _CMP_EQ_OQ: set = x == y; break;
+        case _CMP_NEQ_UQ: set = x != y; break;
+        default: __builtin_trap();      /* a predicate this file does not emulate */
+        }
+        bits |= (unsigned)set << j;
+    }
+    return (rs_emu_mask16)bits;
+}
+RS_EMU rs_emu_mask16 rs_emu_cmpeq_epi32_mask(rs_emu_m512i a, rs_emu_m512i b)
+{
+    unsigned bits = 0;
+    for (int j = 0; j < 16; ++j)
+        bits |= (unsigned)(a.i[j] == b.i[j]) << j;
+    return (rs_emu_mask16)bits;
+}
+RS_EMU rs_emu_mask16 rs_emu_cmplt_epi32_mask(rs_emu_m512i a, rs_emu_m512i b)
+{
+    unsigned bits = 0;
+    for (int j = 0; j < 16; ++j)
+        bits |= (unsigned)(a.i[j] < b.i[j]) << j;
+    return (rs_emu_mask16)bits;
+}
+/* VPMOVD2M: each lane's sign bit */
+RS_EMU rs_emu_mask16 rs_emu_movepi32_mask(rs_emu_m512i a)
+{
+    unsigned bits = 0;
+    for (int j = 0; j < 16; ++j)
+        bits |= ((uint32_t)a.i[j] >> 31) << j;
+    return (rs_emu_mask16)bits;
+}
+/* lane j: mask bit j ? b : a */
+RS_EMU rs_emu_m512 rs_emu_mask_blend_ps(rs_emu_mask16 k, rs_emu_m512 a, rs_emu_m512 b)
+{
+    rs_emu_m512 r;
+    for (int j = 0; j < 16; ++j)
+        r.f[j] = (k >> j & 1) ? b.f[j] : a.f[j];
+    return r;
+}
+RS_EMU rs_emu_m512i rs_emu_mask_blend_epi32(rs_emu_mask16 k, rs_emu_m512i a, rs_emu_m512i b)
+{
+    rs_emu_m512i r;
+    for (int j = 0; j < 16; ++j)
+        r.i[j] = (k >> j & 1) ? b.i[j] : a.i[j];
+    return r;
+}
+RS_EMU rs_emu_m512i rs_emu_add_epi32(rs_emu_m512i a, rs_emu_m512i b)
+{
+    rs_emu_m512i r;
+    for (int j = 0; j < 16; ++j)
+        r.i[j] = (int32_t)((uint32_t)a.i[j] + (uint32_t)b.i[j]);
+    return r;
+}
+/* the low 32 bits of each product */
+RS_EMU rs_emu_m512i rs_emu_mullo_epi32(rs_emu_m512i a, rs_emu_m512i b)
+{
+    rs_emu_m512i r;
+    for (int j = 0; j < 16; ++j)
+        r.i[j] = (int32_t)((uint32_t)a.i[j] * (uint32_t)b.i[j]);
+    return r;
+}
+/* VPCOMPRESSD with a zero mask: the lanes in k, in order, then zeros */
+RS_EMU rs_emu_m512i rs_emu_maskz_compress_epi32(rs_emu_mask16 k, rs_emu_m512i a)
+{
+    rs_emu_m512i r;
+    int n = 0;
+    for (int j = 0; j < 16; ++j)
+        if (k >> j & 1)
+            r.i[n++] = a.i[j];
+    for (; n < 16; ++n)
+        r.i[n] = 0;
+    return r;
+}
+/* VGATHERDPS: lane j reads the float at base + index[j] * scale bytes */
+RS_EMU rs_emu_m512 rs_emu_i32gather_ps(rs_emu_m512i index, const void *base, int scale)
+{
+    rs_emu_m512 r;
+    for (int j = 0; j < 16; ++j)
+        memcpy(&r.f[j], (const char *)base + (int64_t)index.i[j] * scale, sizeof(float));
+    return r;
+}
+
+#undef RS_EMU
+
+/* the names the avx512 code is written with, sent here */
+#define __m512 rs_emu_m512
+#define __m512i rs_emu_m512i
+#define __mmask16 rs_emu_mask16
+#define _mm512_add_ps rs_emu_add_ps
+#define _mm512_sub_ps rs_emu_sub_ps
+#define _mm512_mul_ps rs_emu_mul_ps
+#define _mm512_div_ps rs_emu_div_ps
+#define _mm512_min_ps rs_emu_min_ps
+#define _mm512_max_ps rs_emu_max_ps
+#define _mm512_set1_ps rs_emu_set1_ps
+#define _mm512_set1_epi32 rs_emu_set1_epi32
+#define _mm512_load_ps rs_emu_load_ps
+#define _mm512_loadu_ps rs_emu_loadu_ps
+#define _mm512_loadu_si512 rs_emu_loadu_si512
+#define _mm512_storeu_ps rs_emu_storeu_ps
+#define _mm512_storeu_si512 rs_emu_storeu_si512
+#define _mm512_castps_si512 rs_emu_castps_si512
+#define _mm512_cmp_ps_mask rs_emu_cmp_ps_mask
+#define _mm512_cmpeq_epi32_mask rs_emu_cmpeq_epi32_mask
+#define _mm512_cmplt_epi32_mask rs_emu_cmplt_epi32_mask
+#define _mm512_movepi32_mask rs_emu_movepi32_mask
+#define _mm512_mask_blend_ps rs_emu_mask_blend_ps
+#define _mm512_mask_blend_epi32 rs_emu_mask_blend_epi32
+#define _mm512_add_epi32 rs_emu_add_epi32
+#define _mm512_mullo_epi32 rs_emu_mullo_epi32
+#define _mm512_maskz_compress_epi32 rs_emu_maskz_compress_epi32
+#define _mm512_i32gather_ps rs_emu_i32gather_ps
+
+#endif
