@@ -210,9 +210,20 @@ def _pack_rows(float[::1] flat, Py_ssize_t rows, Py_ssize_t n):
     if not 0 <= n <= capacity:
         raise ValueError("_pack_rows: 0 <= n <= len(flat) // rows expected")
     with nogil:
-        for r in range(1, rows if n else 0):
+        for r in range(1, rows if 0 < n < capacity else 0):
             memmove(&flat[r * n], &flat[r * capacity], n * sizeof(float))
     return np.asarray(flat)[:rows * n].reshape(rows, n)
+
+
+def _count_hits(const int32_t[::1] prim):
+    """How many of the rays hit something (``prim >= 0``): each makes at most one bounce
+    ray and one shadow ray per light, so the new batches are made no larger (a larger
+    one would have its unused lanes written as padding when it is cut to its rays)."""
+    cdef Py_ssize_t i, hits = 0
+    with nogil:
+        for i in range(prim.shape[0]):
+            hits += prim[i] >= 0
+    return hits
 
 
 def _shade(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
@@ -288,7 +299,7 @@ class LambertShader(Shader):
         if self._prepared is None or self._prepared[0] is not scene:
             self.prepare(scene)
         _, faces, emitters, light_pos, light_int = self._prepared
-        n = len(rays)
+        n = _count_hits(hits.prim)                      # the rays that make new ones
         k_max = n if depth < self.max_depth else 0     # the last depth makes no bounce
         next_rays = RayBatch._unfilled(k_max)    # _shade writes every row of its rays
         next_parent = np.empty(k_max, dtype=np.int32)
