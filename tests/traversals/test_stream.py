@@ -236,6 +236,56 @@ def test_ties_degenerates_and_grazing_rays(each_isa, ties, params):
     assert_same_hits(hits, ref, f"{each_isa} {params}")
 
 
+@pytest.fixture(scope="module")
+def face_planes():
+    """For each ordered pair of axes (p, q): a unit grid in the plane p = 0, and rays that
+    travel toward it along p with no q component from an origin on a grid line q = j.
+    The boxes have faces at those lines, so a slab test meets 0 * inf = NaN on axis q
+    (q = z: the last axis a slab test takes, where a NaN is not overwritten)."""
+    rng = np.random.default_rng(11)
+    g, n = 8, 400
+    ii, jj = np.meshgrid(np.arange(g + 1), np.arange(g + 1), indexing="ij")
+    k = lambda i, j: i * (g + 1) + j  # noqa: E731
+    F = np.array([f for i in range(g) for j in range(g)
+                  for f in ([k(i, j), k(i + 1, j), k(i + 1, j + 1)],
+                            [k(i, j), k(i + 1, j + 1), k(i, j + 1)])], np.int32)
+    cases = []
+    for p in range(3):
+        for q in range(3):
+            if q == p:
+                continue
+            r = 3 - p - q                       # the axis the rays may drift along
+            V = np.zeros(((g + 1) ** 2, 3), F32)
+            V[:, q], V[:, r] = ii.ravel(), jj.ravel()
+            o = np.zeros((n, 3), F32)
+            o[:, p] = 3.0
+            o[:, q] = rng.choice([0, 8, 3, 5], n, p=[0.35, 0.35, 0.15, 0.15])  # box faces
+            o[:, r] = rng.uniform(0.05, 7.95, n)
+            d = np.zeros((n, 3), F32)
+            d[:, p] = -1.0
+            d[:, r] = rng.uniform(-0.2, 0.2, n)
+            rays = RayBatch.from_arrays(o, d)
+            cases.append(((p, q), V, F, BVH(V, F, max_leaf=3), rays, brute_force(V, F, rays)))
+    return cases
+
+
+@pytest.mark.parametrize("frustum", [False, True])
+@pytest.mark.parametrize("params", [SETTINGS[0], SETTINGS[5], SETTINGS[-3], SETTINGS[-1]],
+                         ids=lambda p: "-".join(map(str, p.values())))
+def test_rays_on_box_faces_with_a_zero_direction_component(each_isa, face_planes, params,
+                                                           frustum):
+    """0 * inf = NaN in a slab test must not lose a box: min/max return their second
+    operand, the running interval, when the first is NaN.  The rays hit the grid's edges
+    on the lines they start on; on its outer lines (0 and 8) every box on the way has
+    that face, so a box lost is a hit lost."""
+    for (p, q), V, F, bvh, rays, ref in face_planes:
+        assert (ref.prim >= 0).mean() > 0.9, (p, q)
+        hits, _ = trace(bvh, rays, frustum=frustum, **params)
+        assert_same_hits(hits, ref, f"{each_isa} {params} frustum={frustum} axes {p}, {q}")
+        occluded, _ = trace(bvh, rays, any_hit=True, frustum=frustum, **params)
+        assert np.array_equal(occluded, ref.prim >= 0), (p, q)
+
+
 def test_sibenik_diffuse(each_isa, workloads, sibenik):
     """First-bounce diffuse rays of Sibenik in the nah sorter's order, one stream per call."""
     rays = workloads(sibenik, "diffuse").rays
