@@ -696,9 +696,10 @@ def _in_threads(run, m, threads, timings):
 
 def default_traversal():
     """The fastest exact traversal measured for the active ISA: ``stream`` where a
-    stream test covers 8 or 16 rays (AVX2, AVX-512), ``wide8`` on SSE2 and the scalar
-    build, where ``stream`` is slower (BENCHMARKS.md §7).  Images do not depend on it."""
-    return "stream" if isa.active() in ("avx2", "avx512", "avx512emu") else "wide8"
+    stream test covers 8 or 16 rays (AVX2, AVX-512 and its emulation), ``wide8`` on SSE2
+    and the scalar build, where ``stream`` is slower (BENCHMARKS.md §7).  Images do not
+    depend on it."""
+    return "wide8" if isa.active() in ("scalar", "sse2") else "stream"
 
 
 def _both(first, second):
