@@ -1,6 +1,6 @@
 """``lambert``: a Lambertian path tracer (cosine-weighted diffuse bounces)."""
 from libc.math cimport sqrtf, M_PI, INFINITY
-from libc.string cimport memmove
+from libc.string cimport memcpy, memmove
 from libc.stdint cimport int32_t, uint32_t
 from raysort._rng cimport seed_key, sample_key, uniform_at
 from raysort._types cimport RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH, rs_prefetch
@@ -157,14 +157,23 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
             if count == 0:
                 continue
             write_rays(&b, sel, count, sh_rays, m, 1)
-            for c in range(3):
-                intensity = light_int[L, c]
-                row = &sh_contrib[c, m]
+            if count == b.n:        # every lane (sel is 0, 1, 2, ...): loops without sel
+                for c in range(3):
+                    intensity = light_int[L, c]
+                    row = &sh_contrib[c, m]
+                    for j in range(count):
+                        row[j] = reflect[c][j] * intensity * weight[j]
+                memcpy(&sh_parent[m], b.ray, count * sizeof(int32_t))
+            else:
+                for c in range(3):
+                    intensity = light_int[L, c]
+                    row = &sh_contrib[c, m]
+                    for j in range(count):
+                        row[j] = reflect[c][sel[j]] * intensity * weight[sel[j]]
                 for j in range(count):
-                    row[j] = reflect[c][sel[j]] * intensity * weight[sel[j]]
+                    sh_parent[m + j] = b.ray[sel[j]]
             for j in range(count):
-                sh_parent[m + j] = b.ray[sel[j]]
-                sh_slot[m + j] = slot[b.ray[sel[j]]]
+                sh_slot[m + j] = slot[sh_parent[m + j]]
             m += count
         if not bounce:
             continue
@@ -191,12 +200,17 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
         if count == 0:
             continue
         write_rays(&b, sel, count, next_rays, k, 1)
-        for c in range(3):
-            row = &next_thr[c, k]
+        if count == b.n:            # every lane: copies
+            for c in range(3):
+                memcpy(&next_thr[c, k], reflect[c], count * sizeof(float))
+            memcpy(&next_parent[k], b.ray, count * sizeof(int32_t))
+        else:
+            for c in range(3):
+                row = &next_thr[c, k]
+                for j in range(count):
+                    row[j] = reflect[c][sel[j]]
             for j in range(count):
-                row[j] = reflect[c][sel[j]]
-        for j in range(count):
-            next_parent[k + j] = b.ray[sel[j]]
+                next_parent[k + j] = b.ray[sel[j]]
         k += count
     n_next[0] = k
     n_shadow[0] = m
@@ -299,12 +313,12 @@ class LambertShader(Shader):
         if self._prepared is None or self._prepared[0] is not scene:
             self.prepare(scene)
         _, faces, emitters, light_pos, light_int = self._prepared
-        n = _count_hits(hits.prim)                      # the rays that make new ones
-        k_max = n if depth < self.max_depth else 0     # the last depth makes no bounce
+        n_hit = _count_hits(hits.prim)                  # the rays that make new ones
+        k_max = n_hit if depth < self.max_depth else 0  # the last depth makes no bounce
         next_rays = RayBatch._unfilled(k_max)    # _shade writes every row of its rays
         next_parent = np.empty(k_max, dtype=np.int32)
         next_thr = np.empty(3 * k_max, dtype=np.float32)     # rows k_max apart, then packed
-        m_max = n * len(light_pos)
+        m_max = n_hit * len(light_pos)
         sh_rays = RayBatch._unfilled(m_max)
         sh_parent = np.empty(m_max, dtype=np.int32)
         sh_slot = np.empty(m_max, dtype=np.int32)
