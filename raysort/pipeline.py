@@ -274,7 +274,7 @@ class Pipeline:
         tile edge in pixels; one sample pass over a tile is a large packet.
     threads : int, default 1
         worker threads (tiles are shared out; the image does not change).
-    batch_rays : int, default 32768
+    batch_rays : int, default 131072
         about how many rays a worker keeps in flight (memory bound); fewer when a
         frame's tiles would otherwise make fewer than ``MIN_RUNS`` runs of tiles.
     check_plugins : bool, default True
@@ -288,7 +288,7 @@ class Pipeline:
     """
 
     def __init__(self, scene=None, *, generator="pinhole", sorter="none", traversal=None,
-                 shader="lambert", tile=32, threads=1, batch_rays=32768, check_plugins=True,
+                 shader="lambert", tile=32, threads=1, batch_rays=131072, check_plugins=True,
                  bvh=None):
         if not (scene is None or isinstance(scene, (Scene, str, os.PathLike))):
             raise ConfigError(f"scene must be a Scene, a packaged scene name or a path to a "
