@@ -16,15 +16,13 @@ round).  Every frame's image must equal the first one's bit for bit (the batches
 counters, never the image).  Run it on an otherwise idle machine: the speed-up needs two
 free cores.
 """
-import argparse
-import os
 import statistics
 import time
 
 import numpy as np
 
 import raysort
-from raysort import isa
+from _frames import frame_parser, pipelines, print_header
 
 
 def spread(values, fmt="{:.3f}"):
@@ -33,27 +31,17 @@ def spread(values, fmt="{:.3f}"):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("scene", nargs="?", default="sibenik")
-    parser.add_argument("--size", type=int, default=1024, help="image edge in pixels (1024)")
-    parser.add_argument("--spp", type=int, default=4, help="samples per pixel (4)")
+    parser = frame_parser(__doc__, 1024)
     parser.add_argument("--batch-rays", default="32768,131072",
                         help="comma-separated batch sizes; the first is the reference")
     parser.add_argument("--rounds", type=int, default=4, help="timed rounds (4)")
     args = parser.parse_args(argv)
     sizes = [int(b) for b in args.batch_rays.split(",")]
 
-    scene = raysort.load_scene(args.scene)
     configs = [(b, threads) for b in sizes for threads in (1, 2)]
-    pipes = {c: raysort.Pipeline(scene, batch_rays=c[0], threads=c[1]) for c in configs}
-    first = pipes[configs[0]]
-    first.render(8, 8, spp=1)                   # builds the BVH and the traversal's trees
-    for pipe in pipes.values():
-        pipe._bvh = first.bvh                   # one BVH for all (read only)
-    print(f"{args.scene} {args.size}x{args.size}, {args.spp} spp, "
-          f"{' + '.join(str(v) for v in first.describe().values())}")
-    print(f"machine: {os.cpu_count()} cores, ISA {isa.active()}, load average before: "
-          f"{os.getloadavg()}")
+    pipes = pipelines(raysort.load_scene(args.scene),
+                      {c: dict(batch_rays=c[0], threads=c[1]) for c in configs})
+    print_header(args, pipes[configs[0]])
 
     reference = None
     cpu, share, wall = ({c: [] for c in configs} for _ in range(3))

@@ -18,27 +18,14 @@ speed-up.  Images are compared bit for bit.
 
 Run it on an otherwise idle machine: the thread speed-up needs two free cores.
 """
-import argparse
 import os
-import platform
 import statistics
 import time
 
 import numpy as np
 
 import raysort
-from raysort import isa
-
-
-def cpu_name():
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
+from _frames import frame_parser, pipelines, print_header
 
 
 def render(pipe, args):
@@ -82,28 +69,15 @@ def stage_table(runs, prepare):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("scene", nargs="?", default="sibenik")
-    parser.add_argument("--size", type=int, default=512, help="image edge in pixels (512)")
-    parser.add_argument("--spp", type=int, default=4, help="samples per pixel (4)")
+    parser = frame_parser(__doc__, 512)
     parser.add_argument("--rounds", type=int, default=5, help="timed rounds (5)")
     parser.add_argument("--stage-rounds", type=int, default=3,
                         help="one-thread frames the stage table is the median of (3)")
     parser.add_argument("--no-threads", action="store_true", help="skip the 2-thread part")
     args = parser.parse_args(argv)
 
-    scene = raysort.load_scene(args.scene)
-    pipes = {n: raysort.Pipeline(scene, threads=n) for n in (1, 2)}
-    pipes[1].render(8, 8, spp=1)        # builds the BVH and the trees the traversal reads
-    pipes[2]._bvh = pipes[1].bvh        # one BVH for both (built once, read only)
-    try:
-        load = os.getloadavg()
-    except OSError:
-        load = None
-    print(f"{args.scene} {args.size}x{args.size}, {args.spp} spp, "
-          f"{' + '.join(str(v) for v in pipes[1].describe().values())}")
-    print(f"machine: {cpu_name()} ({os.cpu_count()} cores), ISA {isa.active()}, "
-          f"load average before: {load}")
+    pipes = pipelines(raysort.load_scene(args.scene), {n: dict(threads=n) for n in (1, 2)})
+    print_header(args, pipes[1])
 
     runs = [cpu_render(pipes[1], args) for _ in range(max(1, args.stage_rounds))]
     result = runs[0][0]

@@ -1,0 +1,53 @@
+"""What the whole-frame benchmarks (``frame_profile.py``, ``batch_size.py``) share: their
+command line, pipelines that read one BVH, and the header naming the frame and machine.
+(They run as scripts, so Python finds this module beside them.)"""
+import argparse
+import os
+import platform
+
+import raysort
+from raysort import isa
+
+
+def frame_parser(doc, size):
+    """An argument parser (description: the first line of ``doc``) with the frame's
+    ``scene``, ``--size`` (default ``size``) and ``--spp``."""
+    p = argparse.ArgumentParser(description=doc.split("\n")[0])
+    p.add_argument("scene", nargs="?", default="sibenik")
+    p.add_argument("--size", type=int, default=size, help=f"image edge in pixels ({size})")
+    p.add_argument("--spp", type=int, default=4, help="samples per pixel (4)")
+    return p
+
+
+def pipelines(scene, configs):
+    """``{key: Pipeline(scene, **kwargs)}`` for ``configs`` ``{key: kwargs}``, all reading the
+    BVH a tiny render of the first one builds (with the trees its traversal reads)."""
+    pipes = {key: raysort.Pipeline(scene, **kwargs) for key, kwargs in configs.items()}
+    first = next(iter(pipes.values()))
+    first.render(8, 8, spp=1)
+    for pipe in pipes.values():
+        pipe._bvh = first.bvh           # built once, read only
+    return pipes
+
+
+def cpu_name():
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def print_header(args, pipe):
+    """The frame, the pipeline's plugins, the machine, its ISA and load."""
+    try:
+        load = os.getloadavg()
+    except OSError:
+        load = None
+    print(f"{args.scene} {args.size}x{args.size}, {args.spp} spp, "
+          f"{' + '.join(str(v) for v in pipe.describe().values())}")
+    print(f"machine: {cpu_name()} ({os.cpu_count()} cores), ISA {isa.active()}, "
+          f"load average before: {load}")
