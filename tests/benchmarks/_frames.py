@@ -2,11 +2,9 @@
 command line, pipelines that read one BVH, and the header naming the frame and machine.
 (They run as scripts, so Python finds this module beside them.)"""
 import argparse
-import os
-import platform
 
 import raysort
-from raysort import isa
+from raysort.bench.report import load_average, machine_info
 
 
 def frame_parser(doc, size):
@@ -30,24 +28,10 @@ def pipelines(scene, configs):
     return pipes
 
 
-def cpu_name():
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
 def print_header(args, pipe):
     """The frame, the pipeline's plugins, the machine, its ISA and load."""
-    try:
-        load = os.getloadavg()
-    except OSError:
-        load = None
+    machine = machine_info()
     print(f"{args.scene} {args.size}x{args.size}, {args.spp} spp, "
           f"{' + '.join(str(v) for v in pipe.describe().values())}")
-    print(f"machine: {cpu_name()} ({os.cpu_count()} cores), ISA {isa.active()}, "
-          f"load average before: {load}")
+    print(f"machine: {machine['cpu']} ({machine['cores']} cores), ISA {machine['isa']}, "
+          f"load average before: {load_average()}")

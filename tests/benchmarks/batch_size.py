@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 import raysort
+
 from _frames import frame_parser, pipelines, print_header
 
 

@@ -18,13 +18,14 @@ speed-up.  Images are compared bit for bit.
 
 Run it on an otherwise idle machine: the thread speed-up needs two free cores.
 """
-import os
 import statistics
 import time
 
 import numpy as np
 
 import raysort
+from raysort.bench.report import load_average
+
 from _frames import frame_parser, pipelines, print_header
 
 
@@ -111,10 +112,7 @@ def main(argv=None):
               f"(min {min(w):.3f}, max {max(w):.3f})")
     print(f"  speed-up 2 threads / 1: median {statistics.median(ratios):.2f}x, per round "
           f"{', '.join(f'{x:.2f}' for x in ratios)}")
-    try:
-        print(f"  load average after: {os.getloadavg()}")
-    except OSError:
-        pass
+    print(f"  load average after: {load_average()}")
 
 
 if __name__ == "__main__":
