@@ -16,6 +16,7 @@ Environment switches (read at build time):
 """
 import os
 import platform
+import runpy
 import subprocess
 import sys
 import tempfile
@@ -75,7 +76,12 @@ ISAS = {
     # runs AVX-512; built only when RAYSORT_BUILD_ISAS names it
     "avx512emu": ([("RAYSORT_EMULATE_AVX512", "1")], ["/arch:AVX2"] if MSVC else ["-mavx2"]),
 }
-ON_REQUEST = {"avx512emu"}
+# The ISAs' names, and which are built only when named, have one owner, which imports
+# nothing and is read here by path (this script cannot import the package it builds).
+_TABLE = runpy.run_path(str(HERE / "raysort" / "_isa_table.py"))
+ON_REQUEST = set(_TABLE["ON_REQUEST"])
+if set(ISAS) | {"sse2"} != set(_TABLE["ISAS"]):
+    sys.exit("setup.py: the ISAs with build flags (ISAS) and raysort/_isa_table.py's ISAS differ")
 
 
 def _compiler_accepts(flags):

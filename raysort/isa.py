@@ -29,17 +29,12 @@ import platform
 import threading
 
 from raysort import _cpuid
+from raysort._isa_table import ISAS, NEEDS as _NEEDS, ON_REQUEST
 from raysort.errors import ConfigError
 
 __all__ = ["ISAS", "baseline", "compiled", "supported", "available", "active", "use",
            "module", "info"]
 
-#: every ISA raysort knows, lowest first
-ISAS = ("scalar", "sse2", "avx2", "avx512", "avx512emu")
-_NEEDS = {"scalar": (), "sse2": ("sse2",), "avx2": ("avx2",),
-          "avx512": ("avx512f", "avx512vl", "avx512bw", "avx512dq"), "avx512emu": ("avx2",)}
-#: ISAs for tests, never chosen by default
-EMULATED = ("avx512emu",)
 _X86 = platform.machine().lower() in ("x86_64", "amd64", "i386", "i686", "x86")
 #: a kernel module every ISA build holds (its presence says the ISA was built)
 _PROBE = "_gather"
@@ -106,7 +101,7 @@ def active():
                     _check(forced, "RAYSORT_ISA")
                     _active = forced
                 else:
-                    _active = [i for i in available() if i not in EMULATED][-1]
+                    _active = [i for i in available() if i not in ON_REQUEST][-1]
     return _active
 
 
