@@ -29,5 +29,20 @@ class NoneSorter(Sorter):
         self.packet_size = integer("packet_size", packet_size, 1, MAX_PACKET)
 
     def sort(self, rays, packets, bounds):
-        order = np.arange(len(rays), dtype=np.int32)
-        return order, fixed_packets(packets, self.packet_size)
+        """``order`` is a read-only view of one ``arange`` that grows to the largest batch
+        (writing a new one per batch cost the frame a pass over memory)."""
+        return _identity(len(rays)), fixed_packets(packets, self.packet_size)
+
+
+_IDENTITY = np.zeros(0, dtype=np.int32)
+
+
+def _identity(n):
+    """``np.arange(n, dtype=np.int32)``, read-only, sharing its memory with every call's."""
+    global _IDENTITY
+    identity = _IDENTITY            # (another thread may replace it: keep this one)
+    if len(identity) < n:
+        identity = np.arange(n, dtype=np.int32)
+        identity.flags.writeable = False
+        _IDENTITY = identity
+    return identity[:n]

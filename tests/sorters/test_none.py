@@ -41,3 +41,17 @@ def test_a_frame_of_packets_is_cut_on_its_boundaries():
     assert np.array_equal(offsets, np.arange(0, 4097, 64))
     _, offsets = sorter.sort(RayBatch(200), np.array([0, 70, 70, 200], np.int32), None)
     assert offsets.tolist() == [0, 64, 70, 134, 198, 200]
+
+
+def test_the_order_is_read_only_and_shared_batch_to_batch():
+    """The order is a read-only view of one arange kept for the largest batch so far: a
+    smaller batch's is a prefix of it, a larger one's is made anew and right."""
+    sorter = raysort.create("sorters", "none")
+    big, _ = sorter.sort(RayBatch(5000), np.array([0, 5000], np.int32), None)
+    small, _ = sorter.sort(RayBatch(300), np.array([0, 300], np.int32), None)
+    assert not big.flags.writeable and not small.flags.writeable
+    assert np.shares_memory(big, small) and np.array_equal(small, np.arange(300))
+    with pytest.raises(ValueError):
+        small[0] = 1
+    bigger, _ = sorter.sort(RayBatch(9000), np.array([0, 9000], np.int32), None)
+    assert np.array_equal(bigger, np.arange(9000)) and np.array_equal(big, np.arange(5000))
