@@ -15,6 +15,8 @@ speed-up.  Images are compared bit for bit.
 
     python tests/benchmarks/frame_profile.py                  # sibenik 512x512, 4 spp
     python tests/benchmarks/frame_profile.py --size 1024 --spp 4 --rounds 5
+    python tests/benchmarks/frame_profile.py --size 1024 --spp 64 --stage-rounds 1 \
+        --stage-threads 2 --no-threads        # issue 12's frame, its stages with 2 threads
 
 Run it on an otherwise idle machine: the thread speed-up needs two free cores.
 """
@@ -75,19 +77,25 @@ def main(argv=None):
     parser.add_argument("--stage-rounds", type=int, default=3,
                         help="one-thread frames the stage table is the median of (3)")
     parser.add_argument("--no-threads", action="store_true", help="skip the 2-thread part")
+    parser.add_argument("--stage-threads", type=int, choices=(1, 2), default=1,
+                        help="threads of the stage table's frames (1; with 2, each stage's "
+                             "CPU is summed over both threads)")
     args = parser.parse_args(argv)
 
     pipes = pipelines(raysort.load_scene(args.scene), {n: dict(threads=n) for n in (1, 2)})
     print_header(args, pipes[1])
 
-    runs = [cpu_render(pipes[1], args) for _ in range(max(1, args.stage_rounds))]
+    threads = args.stage_threads
+    runs = [cpu_render(pipes[threads], args) for _ in range(max(1, args.stage_rounds))]
     result = runs[0][0]
-    print(f"\none thread: {statistics.median(s for _, s, _ in runs):.2f} s wall (median), "
+    print(f"\n{'one thread' if threads == 1 else f'{threads} threads'}: "
+          f"{statistics.median(s for _, s, _ in runs):.2f} s wall (median), "
           f"{result.stats.total_rays:,} rays")
     stage_table([res.stats for res, _, _ in runs], prepare_seconds(pipes[1]))
-    covered = [sum(res.stats.stage_seconds.values()) / cpu for res, _, cpu in runs]
-    print(f"  the stages hold {statistics.median(covered):.1%} of the render's thread CPU "
-          f"(median; the rest: the shader's prepare, the render's set-up)")
+    if threads == 1:            # (the calling thread's CPU is not the frame's with more)
+        covered = [sum(res.stats.stage_seconds.values()) / cpu for res, _, cpu in runs]
+        print(f"  the stages hold {statistics.median(covered):.1%} of the render's thread "
+              f"CPU (median; the rest: the shader's prepare, the render's set-up)")
     if args.no_threads:
         return
 
