@@ -273,6 +273,18 @@ cdef extern from *:
         return n;
     #endif
     }
+    /* Ask for the lines of out[0, n) for writing: a large packet's part of the order,
+     * which the last radix pass writes at random within it, and which is not in the
+     * cache after a traversal.  Asked before the packet's keys are made, so the lines
+     * are there when the pass runs (the sort 0.94-0.98 of before, warm or with 4 or
+     * 64 MB read between sorts, Zen 3, AVX2; the same in nah.pyx measured 0.96-1.02). */
+    static inline void rs_keysort_prefetch_out(int32_t *out, int n)
+    {
+    #if defined(__GNUC__) || defined(__clang__)
+        for (int i = 0; i < n; i += 16)
+            __builtin_prefetch(out + i, 1, 3);
+    #endif
+    }
     static inline int rs_keysort_ctz64(uint64_t x)
     {
     #if defined(__GNUC__) || defined(__clang__)
@@ -288,6 +300,7 @@ cdef extern from *:
     void inv_sqrt "rs_keysort_inv_sqrt"(const float *x, float *out, int m) noexcept nogil
     void quantise "rs_keysort_quantise"(const float *c, int32_t *q, int m) noexcept nogil
     int clz64 "rs_keysort_clz64"(uint64_t x) noexcept nogil
+    void prefetch_out "rs_keysort_prefetch_out"(int32_t *out, int n) noexcept nogil
     int ctz64 "rs_keysort_ctz64"(uint64_t x) noexcept nogil
     void end_points "rs_keysort_end_points"(const float *const *o, const float *const *d,
                                             const float *tmax, const float *prev, int m,
@@ -890,6 +903,7 @@ cdef object sort_packets(const KeyInputs *a, const uint64_t *keys, const int32_t
     with nogil:
         for p in range(n_packets):
             if packets[p + 1] > packets[p]:
+                prefetch_out(&order_mv[packets[p]], packets[p + 1] - packets[p])
                 if a != NULL:       # sort_packet reads the keys from its own work buffer
                     ray_keys(a, packets[p], packets[p + 1] - packets[p], &ckey[0])
                     kp = &ckey[0]
