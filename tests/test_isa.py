@@ -4,8 +4,10 @@ All ISAs are checked in this one installation through ``raysort.isa.use``;
 an ISA that is compiled but not supported here is reported as a skip.
 """
 import os
+import runpy
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -130,9 +132,6 @@ def test_cli_reports_a_bad_raysort_isa_in_one_line(tmp_path):
 def test_the_isa_table_is_what_setup_py_reads():
     """setup.py reads ``raysort/_isa_table.py`` by path, without the package: the file runs
     on its own (it imports nothing) and gives raysort.isa its names."""
-    import runpy
-    from pathlib import Path
-
     table = runpy.run_path(str(Path(isa.__file__).with_name("_isa_table.py")))
     assert table["ISAS"] == isa.ISAS
     assert table["ON_REQUEST"] == isa.ON_REQUEST
