@@ -115,6 +115,7 @@ cdef extern from "raysort/types.h" nogil:
 cdef extern from "raysort/simd.h" nogil:
     const char *rs_isa_name()
     void rs_prefetch(const void *p)
+    void rs_prefetchw(const void *p)
     float rs_minf(float a, float b)
     float rs_maxf(float a, float b)
     int rs_active4(const rs_rays *r, int i)

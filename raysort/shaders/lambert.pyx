@@ -3,7 +3,8 @@ from libc.math cimport sqrtf, M_PI, INFINITY
 from libc.string cimport memcpy, memmove
 from libc.stdint cimport int32_t, uint32_t
 from raysort._rng cimport seed_key, sample_key, uniform_at
-from raysort._types cimport RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH, rs_prefetch
+from raysort._types cimport (RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX, RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE,
+                             RS_MAX_DEPTH, rs_prefetch, rs_prefetchw)
 from raysort.shaders._shading cimport (LANES, HitBlock, add_hit, leave_surfaces,
                                        cosine_directions, write_rays)
 
@@ -17,7 +18,8 @@ from raysort.rays import RayBatch, aligned_empty
 
 
 cdef enum:
-    PREFETCH_AHEAD = 16     # rays between a face-data prefetch and its use
+    ROWS_AHEAD = 2 * LANES  # rays between a prefetch of the input rows and their use
+    LINE_VALUES = 16        # 4-byte values in a 64-byte cache line
 
 # A face's shading data in half a cache line (a hit is one random access, and the
 # records of a scene take half the cache they would in a line each): its geometric
@@ -90,7 +92,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                       float[:, ::1] next_rays, int32_t[::1] next_parent, float[:, ::1] next_thr,
                       float[:, ::1] sh_rays, int32_t[::1] sh_parent, int32_t[::1] sh_slot,
                       float[:, ::1] sh_contrib, int *n_next, int *n_shadow) noexcept nogil:
-    cdef int n = prim.shape[0], blk, i0, i, f, c, h, j, L, count, k = 0, m = 0, e
+    cdef int n = prim.shape[0], blk, i0, i, f, c, h, j, L, line, count, k = 0, m = 0, e
     cdef uint32_t dim = RS_DIM_BOUNCE + RS_DIMS_PER_BOUNCE * prm.depth   # types.h's budget
     cdef uint32_t seed_k = seed_key(prm.seed)
     cdef bint bounce = prm.depth < prm.max_depth
@@ -103,15 +105,47 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
     cdef uint32_t key[LANES]           # the path's random-number key
     cdef int32_t ok[LANES]             # 1 where the lane's shadow ray is made
     cdef int32_t sel[LANES]            # the lanes that make a ray, ascending
+    cdef int32_t hit_slot[LANES]       # the path's accumulator row
     cdef float *row
     for blk in range((n + LANES - 1) // LANES):
         i0 = blk * LANES
+        # Prefetches (hints; the results do not depend on them).  The kernel reads
+        # fourteen rows and writes up to twenty-five side by side, more streams than
+        # the hardware prefetchers follow: a later block's input lines, the next
+        # block's output lines (for writing), and the next block's face records.
+        for line in range(LANES // LINE_VALUES):
+            j = i0 + ROWS_AHEAD + line * LINE_VALUES
+            if j < n:
+                for c in range(3):
+                    rs_prefetch(&rays[RS_RAY_OX + c, j])
+                    rs_prefetch(&rays[RS_RAY_DX + c, j])
+                    rs_prefetch(&thr[c, j])
+                rs_prefetch(&t[j])
+                rs_prefetch(&prim[j])
+                rs_prefetch(&pixel[j])
+                rs_prefetch(&sample[j])
+                rs_prefetch(&slot[j])
+        for line in range(LANES // LINE_VALUES):
+            j = LANES + line * LINE_VALUES
+            if m + j < sh_parent.shape[0]:
+                for c in range(RS_RAY_ROWS):
+                    rs_prefetchw(&sh_rays[c, m + j])
+                for c in range(3):
+                    rs_prefetchw(&sh_contrib[c, m + j])
+                rs_prefetchw(&sh_parent[m + j])
+                rs_prefetchw(&sh_slot[m + j])
+            if k + j < next_parent.shape[0]:
+                for c in range(RS_RAY_ROWS):
+                    rs_prefetchw(&next_rays[c, k + j])
+                for c in range(3):
+                    rs_prefetchw(&next_thr[c, k + j])
+                rs_prefetchw(&next_parent[k + j])
+        for i in range(i0 + LANES, min(i0 + 2 * LANES, n)):
+            if prim[i] >= 0:
+                rs_prefetch(&faces[prim[i], 0])
         # the hits of the next LANES rays into a block; misses add the sky, emitters their light
         b.n = 0
         for i in range(i0, min(i0 + LANES, n)):
-            if i + PREFETCH_AHEAD < n and prim[i + PREFETCH_AHEAD] >= 0:
-                # the face data of a ray further on, which its hit makes a random access
-                rs_prefetch(&faces[prim[i + PREFETCH_AHEAD], 0])
             f = prim[i]
             if f < 0:
                 for c in range(3):
@@ -124,6 +158,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
             h = b.n
             for c in range(3):
                 reflect[c][h] = thr[c, i] * faces[f, FACE_ALBEDO + c]
+            hit_slot[h] = slot[i]
             if bounce:
                 key[h] = sample_key(seed_k, pixel[i], sample[i])
             add_hit(&b, rays, t, i, &faces[f, FACE_NORMAL])
@@ -164,6 +199,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                     for j in range(count):
                         row[j] = reflect[c][j] * intensity * weight[j]
                 memcpy(&sh_parent[m], b.ray, count * sizeof(int32_t))
+                memcpy(&sh_slot[m], hit_slot, count * sizeof(int32_t))
             else:
                 for c in range(3):
                     intensity = light_int[L, c]
@@ -172,8 +208,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                         row[j] = reflect[c][sel[j]] * intensity * weight[sel[j]]
                 for j in range(count):
                     sh_parent[m + j] = b.ray[sel[j]]
-            for j in range(count):
-                sh_slot[m + j] = slot[sh_parent[m + j]]
+                    sh_slot[m + j] = hit_slot[sel[j]]
             m += count
         if not bounce:
             continue

@@ -280,10 +280,8 @@ cdef extern from *:
      * 64 MB read between sorts, Zen 3, AVX2; the same in nah.pyx measured 0.96-1.02). */
     static inline void rs_keysort_prefetch_out(int32_t *out, int n)
     {
-    #if defined(__GNUC__) || defined(__clang__)
         for (int i = 0; i < n; i += 16)
-            __builtin_prefetch(out + i, 1, 3);
-    #endif
+            rs_prefetchw(out + i);
     }
     static inline int rs_keysort_ctz64(uint64_t x)
     {

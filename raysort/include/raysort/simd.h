@@ -75,11 +75,14 @@
  * force would report (thin boxes of axis-aligned floors, ties at equal t). */
 #define RS_BOX_SLACK 1.00006103515625f
 
-/* Ask for a node's cache line ahead of its visit (a hint; no effect on results). */
+/* Ask for a node's cache line ahead of its visit (a hint; no effect on results);
+ * rs_prefetchw asks for a line that is about to be written (in a state to write). */
 #if defined(__GNUC__) || defined(__clang__)
 #  define rs_prefetch(p) __builtin_prefetch((p), 0, 3)
+#  define rs_prefetchw(p) __builtin_prefetch((p), 1, 3)
 #else
 #  define rs_prefetch(p) ((void)0)
+#  define rs_prefetchw(p) ((void)0)
 #endif
 
 /* A pointer no other pointer of the function reaches (C99 restrict, in the spelling
