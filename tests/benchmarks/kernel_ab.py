@@ -1,0 +1,118 @@
+"""A rebuilt kernel module against a saved copy of its old build, in whole frames.
+
+Before changing a kernel, copy the active ISA's build of its module aside; rebuild; then
+
+    cp raysort/_isa/avx2/shaders/lambert.cpython-*.so /tmp/old-lambert.so   # before the edit
+    python tests/benchmarks/kernel_ab.py shaders.lambert /tmp/old-lambert.so \\
+        --size 1024 --spp 16 --rounds 6 --function _shade
+
+renders the frame (the default pipeline) with each build in turn, in one process, the
+order alternated every round (old, new; new, old; ...) after a warm-up frame, and prints
+per stage (``RenderStats.stage_seconds``, thread CPU) the median [min, max] of each build
+and the median [min, max] of the per-round ratios new / old.  ``--function`` also times
+that function of the module (thread CPU of its calls within each frame: the kernel
+alone, without its stage's other work).  The two builds' images must be bit-identical, or
+the script exits with 1.  The module must be one the pipeline reaches through
+:func:`raysort.isa.module` (the per-ISA kernels); the old copy is loaded from its own
+file, so both builds live in the process side by side.  Run with ``RAYSORT_ISA`` set to
+the ISA whose build was copied.
+"""
+import argparse
+import importlib.machinery
+import importlib.util
+import statistics
+import sys
+import time
+
+import numpy as np
+
+import raysort
+from raysort import isa
+
+from _frames import print_header
+
+
+class TimedModule:
+    """A module whose ``function`` adds its calls' thread CPU to ``seconds``."""
+
+    def __init__(self, module, function):
+        self.module, self.function, self.seconds = module, function, 0.0
+        self._timed = None
+        if function:
+            inner = getattr(module, function)
+
+            def timed(*args, **kwargs):
+                start = time.thread_time()
+                try:
+                    return inner(*args, **kwargs)
+                finally:
+                    self.seconds += time.thread_time() - start
+            self._timed = timed
+
+    def __getattr__(self, name):
+        if name == self.function:
+            return self._timed
+        return getattr(self.module, name)
+
+
+def load_copy(name, path):
+    """The extension module in ``path`` (a copy of a build of ``name``), under a name of
+    its own."""
+    alias = "raysort_kernel_ab_old." + name.rsplit(".", 1)[-1]
+    loader = importlib.machinery.ExtensionFileLoader(alias, path)
+    module = importlib.util.module_from_spec(importlib.util.spec_from_loader(alias, loader))
+    loader.exec_module(module)
+    return module
+
+
+def spread(values):
+    return f"{statistics.median(values):8.4f} [{min(values):.4f}, {max(values):.4f}]"
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("module", help="kernel module, as raysort.isa.module names it")
+    parser.add_argument("old", help="a copy of that module's old build (.so)")
+    parser.add_argument("scene", nargs="?", default="sibenik")
+    parser.add_argument("--size", type=int, default=512, help="image edge in pixels (512)")
+    parser.add_argument("--spp", type=int, default=16, help="samples per pixel (16)")
+    parser.add_argument("--rounds", type=int, default=6, help="frames per build (6)")
+    parser.add_argument("--function", default="",
+                        help="also time this function of the module (e.g. _shade)")
+    parser.add_argument("--threads", type=int, default=1, help="render threads (1)")
+    args = parser.parse_args(argv)
+    builds = {"old": TimedModule(load_copy(args.module, args.old), args.function),
+              "new": TimedModule(isa.module(args.module), args.function)}
+    pipe = raysort.Pipeline(args.scene, threads=args.threads)
+    print_header(args, pipe)
+    print(f"module {args.module}: old {args.old}, new {builds['new'].module.__file__}")
+    pipe.render(64, 64, spp=1, seed=1)                  # builds the trees
+    runs, images = {"old": [], "new": []}, {}
+    for r in range(args.rounds):
+        for key in (("old", "new") if r % 2 == 0 else ("new", "old")):
+            build = builds[key]
+            isa._modules[args.module] = build
+            before = build.seconds
+            result = pipe.render(args.size, args.size, spp=args.spp, seed=1)
+            seconds = dict(result.stats.stage_seconds)
+            seconds["frame"] = sum(result.stats.stage_seconds.values())
+            if args.function:
+                seconds[args.function] = build.seconds - before
+            runs[key].append(seconds)
+            images.setdefault(key, np.asarray(result.image))
+    del isa._modules[args.module]
+    same = np.array_equal(images["old"], images["new"])
+    print(f"{args.rounds} rounds; images bit-identical: {same}")
+    print(f"  {'CPU s':<10}{'old':>26}{'new':>26}   new / old per round")
+    for stage in runs["old"][0]:
+        old = [run[stage] for run in runs["old"]]
+        new = [run[stage] for run in runs["new"]]
+        if min(old) == 0:            # a stage this pipeline does not run
+            continue
+        ratios = [n / o for n, o in zip(new, old)]
+        print(f"  {stage:<10}{spread(old):>26}{spread(new):>26}   {spread(ratios)}")
+    return 0 if same else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
