@@ -82,6 +82,19 @@ cdef struct ShadeParams:
     int rr_depth
 
 
+cdef inline void prefetch_new_rays(float *rays, Py_ssize_t ray_stride, float *weight,
+                                   Py_ssize_t weight_stride, int32_t *parent) noexcept nogil:
+    """Ask, for writing, for the cache line at ``rays`` in each of a batch's
+    ``RS_RAY_ROWS`` rows (``ray_stride`` bytes apart), at ``weight`` in each of three
+    rows (``weight_stride`` bytes apart) and at ``parent``: where new rays go."""
+    cdef int r
+    for r in range(RS_RAY_ROWS):
+        rs_prefetchw(<char *> rays + r * ray_stride)
+    for r in range(3):
+        rs_prefetchw(<char *> weight + r * weight_stride)
+    rs_prefetchw(parent)
+
+
 cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
                       const float[:, ::1] faces, const float[:, ::1] emitters,
                       const float[::1] sky,
@@ -128,18 +141,13 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
         for line in range(LANES // LINE_VALUES):
             j = LANES + line * LINE_VALUES
             if m + j < sh_parent.shape[0]:
-                for c in range(RS_RAY_ROWS):
-                    rs_prefetchw(&sh_rays[c, m + j])
-                for c in range(3):
-                    rs_prefetchw(&sh_contrib[c, m + j])
-                rs_prefetchw(&sh_parent[m + j])
+                prefetch_new_rays(&sh_rays[0, m + j], sh_rays.strides[0],
+                                  &sh_contrib[0, m + j], sh_contrib.strides[0],
+                                  &sh_parent[m + j])
                 rs_prefetchw(&sh_slot[m + j])
             if k + j < next_parent.shape[0]:
-                for c in range(RS_RAY_ROWS):
-                    rs_prefetchw(&next_rays[c, k + j])
-                for c in range(3):
-                    rs_prefetchw(&next_thr[c, k + j])
-                rs_prefetchw(&next_parent[k + j])
+                prefetch_new_rays(&next_rays[0, k + j], next_rays.strides[0],
+                                  &next_thr[0, k + j], next_thr.strides[0], &next_parent[k + j])
         for i in range(i0 + LANES, min(i0 + 2 * LANES, n)):
             if prim[i] >= 0:
                 rs_prefetch(&faces[prim[i], 0])
