@@ -87,20 +87,43 @@ def test_ties_and_zero_area_triangles_on_every_isa(each_isa, rng):
         assert counters.ia > 0
 
 
-def test_extents_and_inactive_lanes(soup_bvh):
-    """tmin > 0, finite tmax, and rays that are empty (tmax <= tmin) between them."""
-    V, F, bvh = soup_bvh
+def extents_case():
+    """Camera rays with tmin > 0, finite tmax, and rays that are empty (tmax <= tmin)
+    between them."""
     rays = camera((-4.0, 5.0, -6.0), (5.0, 3.0, 5.0), 32, fov=0.3)
     n = len(rays)
     rays.tmin[:] = np.where(np.arange(n) % 3 == 0, 2.0, 0.0)
     rays.tmax[:] = np.where(np.arange(n) % 5 == 0, 9.0, np.inf)
     rays.tmax[np.arange(n) % 7 == 0] = 1.0
     rays.tmin[np.arange(n) % 7 == 0] = 1.0
+    return rays
+
+
+def test_extents_and_inactive_lanes_on_every_isa(each_isa, soup_bvh):
+    V, F, bvh = soup_bvh
+    rays = extents_case()
     ref = brute_force(V, F, rays)
-    for size in (64, 20):
+    for size in (64, 20, 37):
         hits, counters = trace(bvh, rays, size=size)
-        assert_same_hits(hits, ref, f"sub-packets of {size}")
+        assert_same_hits(hits, ref, f"{each_isa}, sub-packets of {size}")
         assert counters.ia > 0
+
+
+def test_walk_decisions_do_not_depend_on_the_isa(each_isa, soup_bvh):
+    """A chunk's bounds and reach are taken several lanes at a time on a SIMD build
+    and one ray at a time on the scalar one: the same values, so the same nodes are
+    visited and the same triangles tested (``ia``, ``tri4``; ``box4`` counts one
+    test per SIMD group of lanes, so it depends on the width)."""
+    V, F, bvh = soup_bvh
+    cases = [extents_case(), camera((14.0, 3.0, 15.0), (5.0, 3.0, 5.0), 40)]
+    got = [trace(bvh, rays, size=size)[1] for rays in cases for size in (64, 37, 20)]
+    previous = raysort.isa.use("scalar")
+    try:
+        want = [trace(bvh, rays, size=size)[1] for rays in cases for size in (64, 37, 20)]
+    finally:
+        raysort.isa.use(previous)
+    assert [(c.ia, c.tri4) for c in got] == [(c.ia, c.tri4) for c in want]
+    assert all(c.ia > 0 for c in want)
 
 
 def test_incoherent_chunks_trace_one_ray_at_a_time_as_wide8(soup_bvh, rng):

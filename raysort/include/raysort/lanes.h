@@ -341,4 +341,27 @@ RS_INLINE void sw_append(int32_t *out, int *n, rs_swi id, int bits)
 }
 #endif
 
+/* The largest and the smallest of a vector's lanes (none may be NaN): a
+ * halving tree over its stored lanes, log2(RS_SW) dependent steps rather than
+ * RS_SW.  The maximum of the same values whatever the order, up to the sign of
+ * a zero, which no comparison sees. */
+RS_INLINE float sw_hmax(rs_swf a)
+{
+    float lane[RS_SW];
+    sw_store(lane, a);
+    for (int w = RS_SW / 2; w > 0; w /= 2)
+        for (int k = 0; k < w; ++k)
+            lane[k] = rs_maxf(lane[k + w], lane[k]);
+    return lane[0];
+}
+RS_INLINE float sw_hmin(rs_swf a)
+{
+    float lane[RS_SW];
+    sw_store(lane, a);
+    for (int w = RS_SW / 2; w > 0; w /= 2)
+        for (int k = 0; k < w; ++k)
+            lane[k] = rs_minf(lane[k + w], lane[k]);
+    return lane[0];
+}
+
 #endif
