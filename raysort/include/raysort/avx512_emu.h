@@ -181,6 +181,13 @@ RS_EMU rs_emu_m512 rs_emu_i32gather_ps(rs_emu_m512i index, const void *base, int
         memcpy(&r.f[j], (const char *)base + (int64_t)index.i[j] * scale, sizeof(float));
     return r;
 }
+/* VEXTRACTF32X8 and the cast to the low half: lanes 8-15 (imm 1) or 0-7 as an
+ * __m256 (the emulation build has AVX2) */
+RS_EMU __m256 rs_emu_extractf32x8_ps(rs_emu_m512 a, int imm)
+{
+    return _mm256_loadu_ps(a.f + (imm & 1) * 8);
+}
+RS_EMU __m256 rs_emu_castps512_ps256(rs_emu_m512 a) { return _mm256_loadu_ps(a.f); }
 
 #undef RS_EMU
 
@@ -212,5 +219,7 @@ RS_EMU rs_emu_m512 rs_emu_i32gather_ps(rs_emu_m512i index, const void *base, int
 #define _mm512_mullo_epi32 rs_emu_mullo_epi32
 #define _mm512_maskz_compress_epi32 rs_emu_maskz_compress_epi32
 #define _mm512_i32gather_ps rs_emu_i32gather_ps
+#define _mm512_extractf32x8_ps rs_emu_extractf32x8_ps
+#define _mm512_castps512_ps256 rs_emu_castps512_ps256
 
 #endif

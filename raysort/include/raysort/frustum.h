@@ -133,24 +133,29 @@ RS_INLINE int rs_frustum_bounds_of(const rs_rays *r, int s, int e, rs_frustum_bo
     return n;
 }
 
-/* The largest t of lanes [s, e): the farthest any ray still looks (a NaN t
- * is skipped).  RS_SW lanes at a time, then sw_hmax: the walk calls it after
- * every leaf, and the one-lane chain of 64 dependent maxima took 11 % of its
- * time on Sponza's camera rays (BENCHMARKS.md section 9). */
+/* The largest t of the active rays of lanes [s, e) (tmin < t, as
+ * rs_frustum_bounds_of's tmax): the farthest any ray still looks.  RS_SW lanes
+ * at a time, then sw_hmax: the walk takes it after each leaf that changed a
+ * hit, and the one-lane chain of 64 dependent maxima took 11 % of its time on
+ * Sponza's camera rays (BENCHMARKS.md section 9). */
 RS_INLINE float rs_frustum_reach(const rs_rays *r, int s, int e)
 {
     float t = -INFINITY;
     int i = s;
 #if RS_SW > 1
     if (i + RS_SW <= e) {
-        rs_swf most = sw_set1(-INFINITY);
-        for (; i + RS_SW <= e; i += RS_SW)
-            most = sw_max(sw_loadu(r->t + i), most);
+        const rs_swf down = sw_set1(-INFINITY);
+        rs_swf most = down;
+        for (; i + RS_SW <= e; i += RS_SW) {
+            rs_swf ti = sw_loadu(r->t + i);
+            most = sw_max(sw_blend(sw_lt(sw_loadu(r->tmin + i), ti), ti, down), most);
+        }
         t = sw_hmax(most);
     }
 #endif
     for (; i < e; ++i)
-        t = rs_maxf(r->t[i], t);
+        if (r->tmin[i] < r->t[i])
+            t = rs_maxf(r->t[i], t);
     return t;
 }
 
@@ -297,16 +302,18 @@ RS_INLINE void rs_frustum_walk(const rs_node8 *nodes, const rs_tri8 *groups, rs_
         if (!rays)
             continue;
         const rs_tri8 *g = &groups[-top.ref - 1];
+        int changed = 0;
         for (; rays; rays &= rays - 1) {
             int i = s + rs_lowest64(rays);
             rs_ray8 ray;
             rs_ray8_load(r, i, &ray);
             for (int k = 0; k < top.tris && r->tmin[i] < r->t[i]; ++k) {
                 c->tri4 += 1;                   /* (an any-hit query stops at its hit) */
-                rs_tri8_hit(r, i, &ray, &g[k], any_hit);
+                changed |= rs_tri8_hit(r, i, &ray, &g[k], any_hit);
             }
         }
-        b->tmax = rs_frustum_reach(r, s, e);
+        if (changed)                            /* t only falls where a hit changed */
+            b->tmax = rs_frustum_reach(r, s, e);
     }
 }
 

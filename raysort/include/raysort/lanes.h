@@ -341,27 +341,42 @@ RS_INLINE void sw_append(int32_t *out, int *n, rs_swi id, int bits)
 }
 #endif
 
-/* The largest and the smallest of a vector's lanes (none may be NaN): a
- * halving tree over its stored lanes, log2(RS_SW) dependent steps rather than
- * RS_SW.  The maximum of the same values whatever the order, up to the sign of
- * a zero, which no comparison sees. */
-RS_INLINE float sw_hmax(rs_swf a)
-{
-    float lane[RS_SW];
-    sw_store(lane, a);
-    for (int w = RS_SW / 2; w > 0; w /= 2)
-        for (int k = 0; k < w; ++k)
-            lane[k] = rs_maxf(lane[k + w], lane[k]);
-    return lane[0];
+/* The largest and the smallest of a vector's lanes (none may be NaN): halves
+ * folded onto each other, log2(RS_SW) dependent steps rather than RS_SW.  The
+ * maximum of the same values whatever the order, up to the sign of a zero,
+ * which no comparison sees. */
+#if RS_ISA_AVX512 || RS_ISA_AVX2 || RS_SSE
+#  if RS_ISA_AVX512
+#    define RS_SW_FOLD(name, op256, op128)                                         \
+RS_INLINE float name(rs_swf a)                                                        \
+{                                                                                     \
+    __m256 h = op256(_mm512_extractf32x8_ps(a, 1), _mm512_castps512_ps256(a));        \
+    __m128 q = op128(_mm256_extractf128_ps(h, 1), _mm256_castps256_ps128(h));         \
+    q = op128(_mm_movehl_ps(q, q), q);                                                \
+    return _mm_cvtss_f32(op128(_mm_shuffle_ps(q, q, 1), q));                          \
 }
-RS_INLINE float sw_hmin(rs_swf a)
-{
-    float lane[RS_SW];
-    sw_store(lane, a);
-    for (int w = RS_SW / 2; w > 0; w /= 2)
-        for (int k = 0; k < w; ++k)
-            lane[k] = rs_minf(lane[k + w], lane[k]);
-    return lane[0];
+#  elif RS_ISA_AVX2
+#    define RS_SW_FOLD(name, op256, op128)                                         \
+RS_INLINE float name(rs_swf a)                                                        \
+{                                                                                     \
+    __m128 q = op128(_mm256_extractf128_ps(a, 1), _mm256_castps256_ps128(a));         \
+    q = op128(_mm_movehl_ps(q, q), q);                                                \
+    return _mm_cvtss_f32(op128(_mm_shuffle_ps(q, q, 1), q));                          \
 }
+#  else
+#    define RS_SW_FOLD(name, op256, op128)                                         \
+RS_INLINE float name(rs_swf a)                                                        \
+{                                                                                     \
+    __m128 q = op128(_mm_movehl_ps(a, a), a);                                         \
+    return _mm_cvtss_f32(op128(_mm_shuffle_ps(q, q, 1), q));                          \
+}
+#  endif
+RS_SW_FOLD(sw_hmax, _mm256_max_ps, _mm_max_ps)
+RS_SW_FOLD(sw_hmin, _mm256_min_ps, _mm_min_ps)
+#  undef RS_SW_FOLD
+#else
+RS_INLINE float sw_hmax(rs_swf a) { return a; }
+RS_INLINE float sw_hmin(rs_swf a) { return a; }
+#endif
 
 #endif
