@@ -188,6 +188,14 @@ RS_EMU __m256 rs_emu_extractf32x8_ps(rs_emu_m512 a, int imm)
     return _mm256_loadu_ps(a.f + (imm & 1) * 8);
 }
 RS_EMU __m256 rs_emu_castps512_ps256(rs_emu_m512 a) { return _mm256_loadu_ps(a.f); }
+/* VBROADCASTF32X8: the eight lanes of a in lanes 0-7 and again in 8-15 */
+RS_EMU rs_emu_m512 rs_emu_broadcast_f32x8(__m256 a)
+{
+    rs_emu_m512 r;
+    _mm256_storeu_ps(r.f, a);
+    _mm256_storeu_ps(r.f + 8, a);
+    return r;
+}
 
 #undef RS_EMU
 
@@ -221,5 +229,6 @@ RS_EMU __m256 rs_emu_castps512_ps256(rs_emu_m512 a) { return _mm256_loadu_ps(a.f
 #define _mm512_i32gather_ps rs_emu_i32gather_ps
 #define _mm512_extractf32x8_ps rs_emu_extractf32x8_ps
 #define _mm512_castps512_ps256 rs_emu_castps512_ps256
+#define _mm512_broadcast_f32x8 rs_emu_broadcast_f32x8
 
 #endif

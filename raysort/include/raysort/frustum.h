@@ -248,6 +248,110 @@ RS_INLINE void rs_frustum_insert(rs_frustum_entry *hit, int m, rs_frustum_entry 
     hit[j] = e;
 }
 
+/* Ray i against the `tris` groups at g, one after the other while it still
+ * looks (an any-hit query stops at its hit), as wide8 does; returns whether
+ * its hit changed. */
+RS_INLINE int rs_frustum_leaf_one(rs_rays *r, int i, const rs_tri8 *g, int tris, int any_hit,
+                                  rs_counters *c)
+{
+    rs_ray8 ray;
+    int changed = 0;
+    rs_ray8_load(r, i, &ray);
+    for (int k = 0; k < tris && r->tmin[i] < r->t[i]; ++k) {
+        c->tri4 += 1;
+        changed |= rs_tri8_hit(r, i, &ray, &g[k], any_hit);
+    }
+    return changed;
+}
+
+#if RS_ISA_AVX512
+/* Rays i and j against the eight triangles of group g at once: ray i in lanes
+ * 0-7 and ray j in lanes 8-15 of 16-lane operations (o, d: their origins and
+ * directions so), each lane performing rs_tri8_hit's operations (rs_tri1's) on
+ * its triangle, so each ray keeps exactly rs_tri8_hit's hit.  On AVX-512 the
+ * 8-lane test leaves half of every register idle; a leaf of a coherent chunk is
+ * nearly always entered by several rays.  `live` says which rays still look
+ * (bit 0: i, bit 1: j); returns which hits changed (the same bits). */
+RS_INLINE int rs_tri8_hit_pair(rs_rays *r, int i, int j, const __m512 o[3], const __m512 d[3],
+                               const rs_tri8 *g, int live, int any_hit)
+{
+#define RS_PAIR(row) _mm512_broadcast_f32x8(_mm256_load_ps(row))
+    __m512 e1x = RS_PAIR(g->e1[0]), e1y = RS_PAIR(g->e1[1]), e1z = RS_PAIR(g->e1[2]);
+    __m512 e2x = RS_PAIR(g->e2[0]), e2y = RS_PAIR(g->e2[1]), e2z = RS_PAIR(g->e2[2]);
+    __m512 dx = d[0], dy = d[1], dz = d[2];
+    __m512 px = _mm512_sub_ps(_mm512_mul_ps(dy, e2z), _mm512_mul_ps(dz, e2y));
+    __m512 py = _mm512_sub_ps(_mm512_mul_ps(dz, e2x), _mm512_mul_ps(dx, e2z));
+    __m512 pz = _mm512_sub_ps(_mm512_mul_ps(dx, e2y), _mm512_mul_ps(dy, e2x));
+    __m512 det = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(e1x, px), _mm512_mul_ps(e1y, py)),
+                               _mm512_mul_ps(e1z, pz));
+    __m512 inv = _mm512_div_ps(_mm512_set1_ps(1.0f), det);
+    __m512 sx = _mm512_sub_ps(o[0], RS_PAIR(g->v0[0]));
+    __m512 sy = _mm512_sub_ps(o[1], RS_PAIR(g->v0[1]));
+    __m512 sz = _mm512_sub_ps(o[2], RS_PAIR(g->v0[2]));
+#undef RS_PAIR
+    __m512 u = _mm512_mul_ps(_mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(sx, px),
+                                                         _mm512_mul_ps(sy, py)),
+                                           _mm512_mul_ps(sz, pz)), inv);
+    __m512 qx = _mm512_sub_ps(_mm512_mul_ps(sy, e1z), _mm512_mul_ps(sz, e1y));
+    __m512 qy = _mm512_sub_ps(_mm512_mul_ps(sz, e1x), _mm512_mul_ps(sx, e1z));
+    __m512 qz = _mm512_sub_ps(_mm512_mul_ps(sx, e1y), _mm512_mul_ps(sy, e1x));
+    __m512 v = _mm512_mul_ps(_mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(dx, qx),
+                                                         _mm512_mul_ps(dy, qy)),
+                                           _mm512_mul_ps(dz, qz)), inv);
+    const __m512 zero = _mm512_set1_ps(0.0f), one = _mm512_set1_ps(1.0f);
+    __mmask16 ok = (__mmask16)((live & 1 ? 0x00FF : 0) | (live & 2 ? 0xFF00 : 0));
+    ok &= _mm512_cmp_ps_mask(det, zero, _CMP_NEQ_UQ) & _mm512_cmp_ps_mask(u, zero, _CMP_GE_OQ)
+          & _mm512_cmp_ps_mask(v, zero, _CMP_GE_OQ)
+          & _mm512_cmp_ps_mask(_mm512_add_ps(u, v), one, _CMP_LE_OQ);
+    if (!ok)                    /* both rays pass outside all eight: t is not needed */
+        return 0;
+    __m512 t = _mm512_mul_ps(_mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(e2x, qx),
+                                                         _mm512_mul_ps(e2y, qy)),
+                                           _mm512_mul_ps(e2z, qz)), inv);
+    __m512 tmin = _mm512_mask_blend_ps(0xFF00, _mm512_set1_ps(r->tmin[i]),
+                                       _mm512_set1_ps(r->tmin[j]));
+    __m512 best = _mm512_mask_blend_ps(0xFF00, _mm512_set1_ps(r->t[i]), _mm512_set1_ps(r->t[j]));
+    ok &= _mm512_cmp_ps_mask(t, tmin, _CMP_GT_OQ) & _mm512_cmp_ps_mask(t, best, _CMP_LE_OQ);
+    if (!ok)
+        return 0;
+    float tl[16], ul[16], vl[16];
+    _mm512_storeu_ps(tl, t);
+    _mm512_storeu_ps(ul, u);
+    _mm512_storeu_ps(vl, v);
+    int changed = 0;
+    for (int h = 0; h < 2; ++h) {
+        int ray = h ? j : i, pick = rs_tri8_pick(r, ray, ok >> (8 * h) & 0xFF, tl + 8 * h, g->id);
+        if (pick >= 0) {
+            rs_tri8_keep(r, ray, tl[8 * h + pick], g->id[pick], ul[8 * h + pick],
+                         vl[8 * h + pick], any_hit);
+            changed |= 1 << h;
+        }
+    }
+    return changed;
+}
+
+/* Rays i and j against the `tris` groups at g, a group at a time for both
+ * while either still looks: rs_frustum_leaf_one's tests and counts for each. */
+RS_INLINE int rs_frustum_leaf_pair(rs_rays *r, int i, int j, const rs_tri8 *g, int tris,
+                                   int any_hit, rs_counters *c)
+{
+    __m512 o[3], d[3];
+    int changed = 0;
+    for (int a = 0; a < 3; ++a) {
+        o[a] = _mm512_mask_blend_ps(0xFF00, _mm512_set1_ps(r->o[a][i]), _mm512_set1_ps(r->o[a][j]));
+        d[a] = _mm512_mask_blend_ps(0xFF00, _mm512_set1_ps(r->d[a][i]), _mm512_set1_ps(r->d[a][j]));
+    }
+    for (int k = 0; k < tris; ++k) {
+        int live = (r->tmin[i] < r->t[i]) | (r->tmin[j] < r->t[j]) << 1;
+        if (!live)
+            break;
+        c->tri4 += rs_popcount(live);
+        changed |= rs_tri8_hit_pair(r, i, j, o, d, &g[k], live, any_hit);
+    }
+    return changed != 0;
+}
+#endif
+
 /* Does the frustum of a chunk pay (RS_FRUSTUM_MIN_RAYS active rays or more,
  * whose directions keep their sign, finite and non-zero, on two axes or more,
  * and spread by at most RS_FRUSTUM_SPREAD on every axis)?  (Measured on Sibenik: with 0.25 camera rays and shadow rays
@@ -303,15 +407,16 @@ RS_INLINE void rs_frustum_walk(const rs_node8 *nodes, const rs_tri8 *groups, rs_
             continue;
         const rs_tri8 *g = &groups[-top.ref - 1];
         int changed = 0;
-        for (; rays; rays &= rays - 1) {
+#if RS_ISA_AVX512
+        for (; rays & (rays - 1); rays &= rays - 1) {   /* two rays or more: a pair */
             int i = s + rs_lowest64(rays);
-            rs_ray8 ray;
-            rs_ray8_load(r, i, &ray);
-            for (int k = 0; k < top.tris && r->tmin[i] < r->t[i]; ++k) {
-                c->tri4 += 1;                   /* (an any-hit query stops at its hit) */
-                changed |= rs_tri8_hit(r, i, &ray, &g[k], any_hit);
-            }
+            rays &= rays - 1;
+            changed |= rs_frustum_leaf_pair(r, i, s + rs_lowest64(rays), g, top.tris, any_hit,
+                                            c);
         }
+#endif
+        for (; rays; rays &= rays - 1)
+            changed |= rs_frustum_leaf_one(r, s + rs_lowest64(rays), g, top.tris, any_hit, c);
         if (changed)                            /* t only falls where a hit changed */
             b->tmax = rs_frustum_reach(r, s, e);
     }

@@ -122,6 +122,37 @@ RS_INLINE int rs_node8_hit(const rs_rays *r, int i, const rs_ray8 *ray, const rs
     return rs_boxes8_hit(r, i, ray, &n->lo[0][0], &n->hi[0][0], 8, entry);
 }
 
+/* Of the lanes in `bits` (t in tl[], primitive ids in id[]), all with t <=
+ * ray i's t, the one with the lowest (t, id) that beats ray i's hit (a t equal
+ * to the ray's needs a lower id): its lane, or -1.  What rs_tri1 applied to the
+ * lanes one after the other would keep. */
+RS_INLINE int rs_tri8_pick(const rs_rays *r, int i, int bits, const float tl[8],
+                           const int32_t id[8])
+{
+    float best = r->t[i];
+    int32_t prim = r->prim[i];
+    int pick = -1;
+    for (; bits; bits &= bits - 1) {
+        int k = rs_lowest_bit((unsigned)bits);
+        if (tl[k] < best || (tl[k] == best && id[k] < prim)) {
+            best = tl[k];
+            prim = id[k];
+            pick = k;
+        }
+    }
+    return pick;
+}
+
+/* Ray i's new hit (with any_hit its t becomes -inf: the query is answered). */
+RS_INLINE void rs_tri8_keep(rs_rays *r, int i, float t, int32_t prim, float u, float v,
+                            int any_hit)
+{
+    r->t[i] = any_hit ? -INFINITY : t;
+    r->prim[i] = prim;
+    r->u[i] = u;
+    r->v[i] = v;
+}
+
 /* One ray against the eight triangles of a group (Moller-Trumbore, two-sided,
  * rs_tri1's operations per lane).  Of the lanes that beat the ray's current
  * hit, the lowest (t, id) is recorded; with any_hit the ray's t becomes -inf.
@@ -158,24 +189,12 @@ RS_INLINE int rs_tri8_hit(rs_rays *r, int i, const rs_ray8 *ray, const rs_tri8 *
         return 0;
     float tl[8], ul[8], vl[8];
     rs8_store(tl, t);
-    int32_t prim = r->prim[i];
-    int pick = -1;
-    for (; bits; bits &= bits - 1) {
-        int k = rs_lowest_bit((unsigned)bits);
-        if (tl[k] < best || (tl[k] == best && g->id[k] < prim)) {
-            best = tl[k];
-            prim = g->id[k];
-            pick = k;
-        }
-    }
+    int pick = rs_tri8_pick(r, i, bits, tl, g->id);
     if (pick < 0)
         return 0;
     rs8_store(ul, u);
     rs8_store(vl, v);
-    r->t[i] = any_hit ? -INFINITY : best;
-    r->prim[i] = prim;
-    r->u[i] = ul[pick];
-    r->v[i] = vl[pick];
+    rs_tri8_keep(r, i, tl[pick], g->id[pick], ul[pick], vl[pick], any_hit);
     return 1;
 }
 
