@@ -225,6 +225,32 @@ def test_reading_the_batch_flags_a_hit_beyond_the_mesh(soup):
     assert order_ok and bad_hit >= 0 and ref.prim[bad_hit] >= 10
 
 
+@pytest.mark.parametrize("reverse", [False, True])
+def test_coherent_chunks_flag_the_first_hit_beyond_the_mesh(each_isa, sibenik, reverse):
+    """Camera rays, whose chunks take the frustum walk: the ``none`` order's consecutive
+    rays have their hits written a row at a time, a chunk-reversed order's one by one.
+    With a mesh shorter than the tree's ids, the first hit beyond it in the sorter's
+    order is the one reported, either way, and every other hit is brute force's."""
+    from types import SimpleNamespace
+    rays = camera_rays(sibenik, 64, 64)[0].rays
+    n = len(rays)
+    ref = brute_force(sibenik.vertices, sibenik.faces, rays)
+    limit = int(np.median(ref.prim[ref.prim >= 0]))
+    order = np.arange(n, dtype=np.int32)
+    if reverse:
+        order = np.ascontiguousarray(order.reshape(-1, 64)[:, ::-1].ravel())
+    bvh = sibenik.bvh()
+    short = SimpleNamespace(faces=bvh.faces[:limit], triangles=bvh.triangles, wide8=bvh.wide8)
+    out = np.empty((4, n), np.float32)
+    counters, _, bad_hit, order_ok = raysort.create("traversals", "stream")._intersect_batch(
+        short, rays.data, order, np.arange(0, n + 1, 64, dtype=np.int32), 0, n // 64, False,
+        out)
+    assert order_ok and counters.ia > 0
+    assert bad_hit == next(int(i) for i in order if ref.prim[i] >= limit)
+    assert np.array_equal(out[1].view(np.int32), ref.prim)
+    assert np.array_equal(out[0], ref.t)
+
+
 @pytest.mark.parametrize("params", SETTINGS[:6] + SETTINGS[-6:],
                          ids=lambda p: "-".join(map(str, p.values())))
 def test_ties_degenerates_and_grazing_rays(each_isa, ties, params):

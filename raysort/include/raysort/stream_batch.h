@@ -68,6 +68,38 @@ RS_INLINE int rs_batch_put(const rs_rays *r, int j, int32_t id, float t0, uint32
     return bad;
 }
 
+/* rs_batch_put of lanes 0 <= j < n to rays id0 + j (closest hits), in loops
+ * without a branch per lane: returns n, or the first lane whose hit breaks the
+ * contract (whose rs_batch_put the caller then makes, to report it, as those
+ * of the lanes after it). */
+RS_INLINE int rs_batch_put_run(const rs_rays *r, int n, int32_t id0, const float *t0,
+                               uint32_t n_prim, rs_batch_hits *out)
+{
+    int bad = 0;
+    for (int j = 0; j < n; ++j) {
+        const int32_t p = r->prim[j];
+        const float t = r->t[j], u = r->u[j], v = r->v[j];
+        bad |= ((uint32_t)(p + 1) > n_prim)
+               | ((p >= 0) & (!(r->tmin[j] < t) | !(t < t0[j]) | ((u - u) + (v - v) != 0.0f)));
+    }
+    if (bad) {
+        int j = 0;
+        while (!rs_batch_put(r, j, id0 + j, t0[j], n_prim, out))
+            ++j;
+        return j;
+    }
+    float *ot = out->t + id0, *ou = out->u + id0, *ov = out->v + id0;
+    int32_t *op = out->prim + id0;
+    for (int j = 0; j < n; ++j) {
+        const int hit = r->prim[j] >= 0;
+        ot[j] = hit ? r->t[j] : INFINITY;
+        op[j] = hit ? r->prim[j] : -1;
+        ou[j] = hit ? r->u[j] : 0.0f;
+        ov[j] = hit ? r->v[j] : 0.0f;
+    }
+    return n;
+}
+
 /* The m records of w traced through the tree, their hits to the batch. */
 RS_INLINE void rs_batch_stream(const int width, const void *tree, const void *leaves, int m,
                                int any_hit, int order, int min_stream, uint32_t n_prim,
@@ -129,13 +161,21 @@ static rs_batch_status rs_stream_batch(const int width, const void *tree, const 
                 for (int a = 0; a < RS_RAY_ROWS; ++a)
                     rs_prefetch(src[a] + r);
             }
-            for (int j = 0; j < RS_FRUSTUM_CHUNK; ++j) {
-                int32_t id = j < n ? order[s + j] : -1;
-                if (j < n && (uint32_t)id >= (uint64_t)n_src) {
-                    status.order_bad = 1;
-                    return status;
-                }
+            /* the chunk's ids (-1 past n), checked without a branch per ray; `run`:
+             * whether they are consecutive (the `none` sorter's), as the hits'
+             * rows can then be written a vector at a time */
+            int bad = 0, run = 1;
+            for (int j = 0; j < n; ++j) {
+                int32_t id = order[s + j];
+                bad |= (uint32_t)id >= (uint64_t)n_src;
+                run &= id == order[s] + j;
                 ids[j] = id;
+            }
+            for (int j = n; j < RS_FRUSTUM_CHUNK; ++j)
+                ids[j] = -1;
+            if (bad) {
+                status.order_bad = 1;
+                return status;
             }
             for (int j = 0; j < RS_FRUSTUM_CHUNK; j += RS_SW) {
                 int bits = rs_gather_block(dst, prim, u, v, NULL, src, ids, j);
@@ -148,7 +188,9 @@ static rs_batch_status rs_stream_batch(const int width, const void *tree, const 
                 memcpy(t0, chunk.t, sizeof t0);
                 rs_frustum_walk((const rs_node8 *)tree, (const rs_tri8 *)leaves, &chunk, 0, n,
                                 any_hit, &b, stack, c);
-                for (int j = 0; j < n; ++j)
+                int first = run && !out->occluded ? rs_batch_put_run(&chunk, n, ids[0], t0,
+                                                                     n_prim, out) : 0;
+                for (int j = first; j < n; ++j)
                     if (rs_batch_put(&chunk, j, ids[j], t0[j], n_prim, out)
                             && status.bad_hit < 0)
                         status.bad_hit = ids[j];
