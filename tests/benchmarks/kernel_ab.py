@@ -16,6 +16,16 @@ first, or the script exits with 1.  The module must be one the pipeline reaches 
 :func:`raysort.isa.module` (the per-ISA kernels); the old copy is loaded from its own
 file, so both builds live in the process side by side.  Run with ``RAYSORT_ISA`` set to
 the ISA whose build was copied.
+
+With ``--rays camera`` (or ``diffuse``) it traces, instead of frames, the primary (or
+first-bounce diffuse) rays of a ``--size`` x ``--size`` image at 1 spp through
+``Pipeline.trace`` (sort, gather, traverse, scatter; plugin checks off): ``--calls`` calls
+per build and round, the round's median call, and prints each build's Mrays/s and the
+per-round speed-up old / new.  The hits must be bit-identical.
+
+    cp raysort/_isa/avx512/traversals/stream.cpython-*.so /tmp/old-stream.so
+    python tests/benchmarks/kernel_ab.py traversals.stream /tmp/old-stream.so sponza \
+        --rays camera --size 256 --rounds 9
 """
 import argparse
 import importlib.machinery
@@ -69,6 +79,48 @@ def spread(values):
     return f"{statistics.median(values):8.4f} [{min(values):.4f}, {max(values):.4f}]"
 
 
+def trace_rounds(args, builds):
+    """--rays: the rays of the workload traced by each build in turn; returns 0 if every
+    call's hits are bit-identical to the first's."""
+    from raysort.workloads import camera_rays, workload
+    scene = raysort.load_scene(args.scene)
+    if args.rays == "camera":
+        work = camera_rays(scene, width=args.size, height=args.size, spp=1, seed=1)[0]
+    else:
+        work = workload(scene, "diffuse:depth=1", width=args.size, height=args.size, spp=1,
+                        seed=1)
+    pipe = raysort.Pipeline(scene, threads=1, check_plugins=False)
+    args.spp = 1
+    print_header(args, pipe)
+    print(f"module {args.module}: old {args.old}, new {builds['new'].module.__file__}")
+    print(f"{len(work.rays)} {args.rays} rays through Pipeline.trace, {args.calls} calls per "
+          f"build and round (median), {args.rounds} rounds after a warm-up")
+    times, first, same = {"old": [], "new": []}, None, True
+    for r in range(args.rounds + 1):
+        for key in (("old", "new") if r % 2 == 0 else ("new", "old")):
+            isa._modules[args.module] = builds[key].module
+            calls = []
+            for _ in range(args.calls):
+                start = time.thread_time()
+                hits, _ = pipe.trace(work.rays, work.packets)
+                calls.append(time.thread_time() - start)
+            if r:
+                times[key].append(statistics.median(calls))
+            if first is None:
+                first = (hits.t.copy(), hits.prim.copy())
+            same = same and np.array_equal(hits.t, first[0]) and np.array_equal(hits.prim,
+                                                                                first[1])
+    del isa._modules[args.module]
+    n = len(work.rays)
+    print(f"every call's hits bit-identical: {same}")
+    for key in ("old", "new"):
+        rates = [n / t / 1e6 for t in times[key]]
+        print(f"  {key}: {spread(rates)} Mrays/s")
+    print(f"  speed-up new / old per round: "
+          f"{spread([o / w for o, w in zip(times['old'], times['new'])])}")
+    return 0 if same else 1
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("module", help="kernel module, as raysort.isa.module names it")
@@ -80,9 +132,15 @@ def main(argv=None):
     parser.add_argument("--function", default="",
                         help="also time this function of the module (e.g. _shade)")
     parser.add_argument("--threads", type=int, default=1, help="render threads (1)")
+    parser.add_argument("--rays", choices=["camera", "diffuse"],
+                        help="trace these rays of the image instead of rendering frames")
+    parser.add_argument("--calls", type=int, default=10,
+                        help="with --rays: calls per build and round (10)")
     args = parser.parse_args(argv)
     builds = {"old": TimedModule(load_copy(args.module, args.old), args.function),
               "new": TimedModule(isa.module(args.module), args.function)}
+    if args.rays:
+        return trace_rounds(args, builds)
     pipe = raysort.Pipeline(args.scene, threads=args.threads)
     print_header(args, pipe)
     print(f"module {args.module}: old {args.old}, new {builds['new'].module.__file__}")
