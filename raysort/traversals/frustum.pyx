@@ -66,7 +66,8 @@ class FrustumTraversal(Traversal):
     frustum checks a node's eight child boxes, children are visited nearest
     first, and boxes behind every ray's closest hit are skipped; at a leaf, each
     ray that enters the leaf's box (SIMD over rays) meets its triangle groups
-    eight triangles at a time, as in ``wide8``.  Chunks that are not coherent
+    eight triangles at a time, as in ``wide8`` (with AVX-512, two rays per
+    16-lane test).  Chunks that are not coherent
     (fewer than 16 active rays, directions that change sign on two axes or more,
     or whose components spread by more than 0.25) are traced one ray at a time,
     as ``wide8`` does, so
