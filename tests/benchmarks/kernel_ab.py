@@ -21,7 +21,8 @@ With ``--rays camera`` (or ``diffuse``) it traces, instead of frames, the primar
 first-bounce diffuse) rays of a ``--size`` x ``--size`` image at 1 spp through
 ``Pipeline.trace`` (sort, gather, traverse, scatter; plugin checks off): ``--calls`` calls
 per build and round, the round's median call, and prints each build's Mrays/s and the
-per-round speed-up old / new.  The hits must be bit-identical.
+per-round speed-up of the new build (the old build's time over the new one's).  The hits
+must be bit-identical.
 
     cp raysort/_isa/avx512/traversals/stream.cpython-*.so /tmp/old-stream.so
     python tests/benchmarks/kernel_ab.py traversals.stream /tmp/old-stream.so sponza \

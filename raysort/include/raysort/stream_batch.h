@@ -168,7 +168,7 @@ static rs_batch_status rs_stream_batch(const int width, const void *tree, const 
             for (int j = 0; j < n; ++j) {
                 int32_t id = order[s + j];
                 bad |= (uint32_t)id >= (uint64_t)n_src;
-                run &= id == order[s] + j;
+                run &= id == (int64_t)order[s] + j;
                 ids[j] = id;
             }
             for (int j = n; j < RS_FRUSTUM_CHUNK; ++j)
