@@ -265,6 +265,13 @@ RS_INLINE int rs_frustum_leaf_one(rs_rays *r, int i, const rs_tri8 *g, int tris,
 }
 
 #if RS_ISA_AVX512
+/* The 16-lane operations RS_MT_UV and RS_MT_T take (simd.h). */
+RS_INLINE __m512 rs16_add(__m512 a, __m512 b) { return _mm512_add_ps(a, b); }
+RS_INLINE __m512 rs16_sub(__m512 a, __m512 b) { return _mm512_sub_ps(a, b); }
+RS_INLINE __m512 rs16_mul(__m512 a, __m512 b) { return _mm512_mul_ps(a, b); }
+RS_INLINE __m512 rs16_div(__m512 a, __m512 b) { return _mm512_div_ps(a, b); }
+RS_INLINE __m512 rs16_set1(float a) { return _mm512_set1_ps(a); }
+
 /* Rays i and j against the eight triangles of group g at once: ray i in lanes
  * 0-7 and ray j in lanes 8-15 of 16-lane operations (o, d: their origins and
  * directions so), each lane performing rs_tri8_hit's operations (rs_tri1's) on
@@ -278,26 +285,9 @@ RS_INLINE int rs_tri8_hit_pair(rs_rays *r, int i, int j, const __m512 o[3], cons
 #define RS_PAIR(row) _mm512_broadcast_f32x8(_mm256_load_ps(row))
     __m512 e1x = RS_PAIR(g->e1[0]), e1y = RS_PAIR(g->e1[1]), e1z = RS_PAIR(g->e1[2]);
     __m512 e2x = RS_PAIR(g->e2[0]), e2y = RS_PAIR(g->e2[1]), e2z = RS_PAIR(g->e2[2]);
-    __m512 dx = d[0], dy = d[1], dz = d[2];
-    __m512 px = _mm512_sub_ps(_mm512_mul_ps(dy, e2z), _mm512_mul_ps(dz, e2y));
-    __m512 py = _mm512_sub_ps(_mm512_mul_ps(dz, e2x), _mm512_mul_ps(dx, e2z));
-    __m512 pz = _mm512_sub_ps(_mm512_mul_ps(dx, e2y), _mm512_mul_ps(dy, e2x));
-    __m512 det = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(e1x, px), _mm512_mul_ps(e1y, py)),
-                               _mm512_mul_ps(e1z, pz));
-    __m512 inv = _mm512_div_ps(_mm512_set1_ps(1.0f), det);
-    __m512 sx = _mm512_sub_ps(o[0], RS_PAIR(g->v0[0]));
-    __m512 sy = _mm512_sub_ps(o[1], RS_PAIR(g->v0[1]));
-    __m512 sz = _mm512_sub_ps(o[2], RS_PAIR(g->v0[2]));
+    __m512 v0x = RS_PAIR(g->v0[0]), v0y = RS_PAIR(g->v0[1]), v0z = RS_PAIR(g->v0[2]);
 #undef RS_PAIR
-    __m512 u = _mm512_mul_ps(_mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(sx, px),
-                                                         _mm512_mul_ps(sy, py)),
-                                           _mm512_mul_ps(sz, pz)), inv);
-    __m512 qx = _mm512_sub_ps(_mm512_mul_ps(sy, e1z), _mm512_mul_ps(sz, e1y));
-    __m512 qy = _mm512_sub_ps(_mm512_mul_ps(sz, e1x), _mm512_mul_ps(sx, e1z));
-    __m512 qz = _mm512_sub_ps(_mm512_mul_ps(sx, e1y), _mm512_mul_ps(sy, e1x));
-    __m512 v = _mm512_mul_ps(_mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(dx, qx),
-                                                         _mm512_mul_ps(dy, qy)),
-                                           _mm512_mul_ps(dz, qz)), inv);
+    RS_MT_UV(rs16, __m512, o, d);
     const __m512 zero = _mm512_set1_ps(0.0f), one = _mm512_set1_ps(1.0f);
     __mmask16 ok = (__mmask16)((live & 1 ? 0x00FF : 0) | (live & 2 ? 0xFF00 : 0));
     ok &= _mm512_cmp_ps_mask(det, zero, _CMP_NEQ_UQ) & _mm512_cmp_ps_mask(u, zero, _CMP_GE_OQ)
@@ -305,9 +295,7 @@ RS_INLINE int rs_tri8_hit_pair(rs_rays *r, int i, int j, const __m512 o[3], cons
           & _mm512_cmp_ps_mask(_mm512_add_ps(u, v), one, _CMP_LE_OQ);
     if (!ok)                    /* both rays pass outside all eight: t is not needed */
         return 0;
-    __m512 t = _mm512_mul_ps(_mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(e2x, qx),
-                                                         _mm512_mul_ps(e2y, qy)),
-                                           _mm512_mul_ps(e2z, qz)), inv);
+    __m512 t = RS_MT_T(rs16);
     __m512 tmin = _mm512_mask_blend_ps(0xFF00, _mm512_set1_ps(r->tmin[i]),
                                        _mm512_set1_ps(r->tmin[j]));
     __m512 best = _mm512_mask_blend_ps(0xFF00, _mm512_set1_ps(r->t[i]), _mm512_set1_ps(r->t[j]));

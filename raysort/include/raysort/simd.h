@@ -343,27 +343,40 @@ RS_INLINE int rs_tri1(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
     return 0;
 }
 
+/* Moller-Trumbore's operations, rs_tri1's in its order, in a lane vocabulary:
+ * the prefix P names its operations (P##_add, _sub, _mul, _div, _set1) and T its
+ * vector type.  RS_MT_UV declares det, inv, u, v (and px..qz) from the origin
+ * o[3] and direction d[3] and the group's rows e1x..e2z, v0x..v0z (in scope);
+ * RS_MT_T is then the hit distance.  The SIMD triangle tests share them (rs_tri4
+ * below, wide8.h's rs_tri8_hit, stream.h's rs_stream_tri, frustum.h's pair
+ * test), so every width performs rs_tri1's operations per lane. */
+#define RS_MT_UV(P, T, o, d)                                                               \
+    T px = P##_sub(P##_mul((d)[1], e2z), P##_mul((d)[2], e2y));                            \
+    T py = P##_sub(P##_mul((d)[2], e2x), P##_mul((d)[0], e2z));                            \
+    T pz = P##_sub(P##_mul((d)[0], e2y), P##_mul((d)[1], e2x));                            \
+    T det = P##_add(P##_add(P##_mul(e1x, px), P##_mul(e1y, py)), P##_mul(e1z, pz));        \
+    T inv = P##_div(P##_set1(1.0f), det);                                                  \
+    T sx = P##_sub((o)[0], v0x), sy = P##_sub((o)[1], v0y), sz = P##_sub((o)[2], v0z);     \
+    T u = P##_mul(P##_add(P##_add(P##_mul(sx, px), P##_mul(sy, py)), P##_mul(sz, pz)), inv); \
+    T qx = P##_sub(P##_mul(sy, e1z), P##_mul(sz, e1y));                                    \
+    T qy = P##_sub(P##_mul(sz, e1x), P##_mul(sx, e1z));                                    \
+    T qz = P##_sub(P##_mul(sx, e1y), P##_mul(sy, e1x));                                    \
+    T v = P##_mul(P##_add(P##_add(P##_mul((d)[0], qx), P##_mul((d)[1], qy)),               \
+                          P##_mul((d)[2], qz)), inv)
+#define RS_MT_T(P) \
+    P##_mul(P##_add(P##_add(P##_mul(e2x, qx), P##_mul(e2y, qy)), P##_mul(e2z, qz)), inv)
+
 /* The same test for lanes [i, i+4); i is a multiple of 4.  Returns the mask
  * of lanes that accepted the hit. */
 RS_INLINE int rs_tri4(const rs_rays *r, int i, const rs_tri *tr, int any_hit)
 {
-    rs_v4f dx = rs_load(r->d[0] + i), dy = rs_load(r->d[1] + i), dz = rs_load(r->d[2] + i);
+    const rs_v4f o[3] = {rs_load(r->o[0] + i), rs_load(r->o[1] + i), rs_load(r->o[2] + i)};
+    const rs_v4f d[3] = {rs_load(r->d[0] + i), rs_load(r->d[1] + i), rs_load(r->d[2] + i)};
     rs_v4f e1x = rs_set1(tr->e1[0]), e1y = rs_set1(tr->e1[1]), e1z = rs_set1(tr->e1[2]);
     rs_v4f e2x = rs_set1(tr->e2[0]), e2y = rs_set1(tr->e2[1]), e2z = rs_set1(tr->e2[2]);
-    rs_v4f px = rs_sub(rs_mul(dy, e2z), rs_mul(dz, e2y));
-    rs_v4f py = rs_sub(rs_mul(dz, e2x), rs_mul(dx, e2z));
-    rs_v4f pz = rs_sub(rs_mul(dx, e2y), rs_mul(dy, e2x));
-    rs_v4f det = rs_add(rs_add(rs_mul(e1x, px), rs_mul(e1y, py)), rs_mul(e1z, pz));
-    rs_v4f inv = rs_div(rs_set1(1.0f), det);
-    rs_v4f sx = rs_sub(rs_load(r->o[0] + i), rs_set1(tr->v0[0]));
-    rs_v4f sy = rs_sub(rs_load(r->o[1] + i), rs_set1(tr->v0[1]));
-    rs_v4f sz = rs_sub(rs_load(r->o[2] + i), rs_set1(tr->v0[2]));
-    rs_v4f u = rs_mul(rs_add(rs_add(rs_mul(sx, px), rs_mul(sy, py)), rs_mul(sz, pz)), inv);
-    rs_v4f qx = rs_sub(rs_mul(sy, e1z), rs_mul(sz, e1y));
-    rs_v4f qy = rs_sub(rs_mul(sz, e1x), rs_mul(sx, e1z));
-    rs_v4f qz = rs_sub(rs_mul(sx, e1y), rs_mul(sy, e1x));
-    rs_v4f v = rs_mul(rs_add(rs_add(rs_mul(dx, qx), rs_mul(dy, qy)), rs_mul(dz, qz)), inv);
-    rs_v4f t = rs_mul(rs_add(rs_add(rs_mul(e2x, qx), rs_mul(e2y, qy)), rs_mul(e2z, qz)), inv);
+    rs_v4f v0x = rs_set1(tr->v0[0]), v0y = rs_set1(tr->v0[1]), v0z = rs_set1(tr->v0[2]);
+    RS_MT_UV(rs, rs_v4f, o, d);
+    rs_v4f t = RS_MT_T(rs);
 
     const rs_v4f zero = rs_set1(0.0f), one = rs_set1(1.0f);
     rs_v4f best = rs_load(r->t + i);

@@ -299,21 +299,9 @@ RS_INLINE void rs_stream_tri(rs_stream_lanes *s, const float *v0, const float *e
     const rs_swf zero = sw_set1(0.0f), one = sw_set1(1.0f);
     rs_swf e1x = sw_set1(e1[0]), e1y = sw_set1(e1[stride]), e1z = sw_set1(e1[2 * stride]);
     rs_swf e2x = sw_set1(e2[0]), e2y = sw_set1(e2[stride]), e2z = sw_set1(e2[2 * stride]);
-    rs_swf dx = s->d[0], dy = s->d[1], dz = s->d[2];
-    rs_swf px = sw_sub(sw_mul(dy, e2z), sw_mul(dz, e2y));
-    rs_swf py = sw_sub(sw_mul(dz, e2x), sw_mul(dx, e2z));
-    rs_swf pz = sw_sub(sw_mul(dx, e2y), sw_mul(dy, e2x));
-    rs_swf det = sw_add(sw_add(sw_mul(e1x, px), sw_mul(e1y, py)), sw_mul(e1z, pz));
-    rs_swf inv = sw_div(one, det);
-    rs_swf sx = sw_sub(s->o[0], sw_set1(v0[0]));
-    rs_swf sy = sw_sub(s->o[1], sw_set1(v0[stride]));
-    rs_swf sz = sw_sub(s->o[2], sw_set1(v0[2 * stride]));
-    rs_swf u = sw_mul(sw_add(sw_add(sw_mul(sx, px), sw_mul(sy, py)), sw_mul(sz, pz)), inv);
-    rs_swf qx = sw_sub(sw_mul(sy, e1z), sw_mul(sz, e1y));
-    rs_swf qy = sw_sub(sw_mul(sz, e1x), sw_mul(sx, e1z));
-    rs_swf qz = sw_sub(sw_mul(sx, e1y), sw_mul(sy, e1x));
-    rs_swf v = sw_mul(sw_add(sw_add(sw_mul(dx, qx), sw_mul(dy, qy)), sw_mul(dz, qz)), inv);
-    rs_swf t = sw_mul(sw_add(sw_add(sw_mul(e2x, qx), sw_mul(e2y, qy)), sw_mul(e2z, qz)), inv);
+    rs_swf v0x = sw_set1(v0[0]), v0y = sw_set1(v0[stride]), v0z = sw_set1(v0[2 * stride]);
+    RS_MT_UV(sw, rs_swf, s->o, s->d);
+    rs_swf t = RS_MT_T(sw);
     rs_swi tid = sw_set1i(prim);
     rs_swm ok = sw_and(sw_and(sw_ne(det, zero), sw_ge(u, zero)),
                        sw_and(sw_ge(v, zero), sw_le(sw_add(u, v), one)));

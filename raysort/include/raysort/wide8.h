@@ -161,26 +161,14 @@ RS_INLINE int rs_tri8_hit(rs_rays *r, int i, const rs_ray8 *ray, const rs_tri8 *
 {
     rs_v8f e1x = rs8_load(g->e1[0]), e1y = rs8_load(g->e1[1]), e1z = rs8_load(g->e1[2]);
     rs_v8f e2x = rs8_load(g->e2[0]), e2y = rs8_load(g->e2[1]), e2z = rs8_load(g->e2[2]);
-    rs_v8f dx = ray->d[0], dy = ray->d[1], dz = ray->d[2];
-    rs_v8f px = rs8_sub(rs8_mul(dy, e2z), rs8_mul(dz, e2y));
-    rs_v8f py = rs8_sub(rs8_mul(dz, e2x), rs8_mul(dx, e2z));
-    rs_v8f pz = rs8_sub(rs8_mul(dx, e2y), rs8_mul(dy, e2x));
-    rs_v8f det = rs8_add(rs8_add(rs8_mul(e1x, px), rs8_mul(e1y, py)), rs8_mul(e1z, pz));
-    rs_v8f inv = rs8_div(rs8_set1(1.0f), det);
-    rs_v8f sx = rs8_sub(ray->o[0], rs8_load(g->v0[0]));
-    rs_v8f sy = rs8_sub(ray->o[1], rs8_load(g->v0[1]));
-    rs_v8f sz = rs8_sub(ray->o[2], rs8_load(g->v0[2]));
-    rs_v8f u = rs8_mul(rs8_add(rs8_add(rs8_mul(sx, px), rs8_mul(sy, py)), rs8_mul(sz, pz)), inv);
-    rs_v8f qx = rs8_sub(rs8_mul(sy, e1z), rs8_mul(sz, e1y));
-    rs_v8f qy = rs8_sub(rs8_mul(sz, e1x), rs8_mul(sx, e1z));
-    rs_v8f qz = rs8_sub(rs8_mul(sx, e1y), rs8_mul(sy, e1x));
-    rs_v8f v = rs8_mul(rs8_add(rs8_add(rs8_mul(dx, qx), rs8_mul(dy, qy)), rs8_mul(dz, qz)), inv);
+    rs_v8f v0x = rs8_load(g->v0[0]), v0y = rs8_load(g->v0[1]), v0z = rs8_load(g->v0[2]);
+    RS_MT_UV(rs8, rs_v8f, ray->o, ray->d);
     const rs_v8f zero = rs8_set1(0.0f), one = rs8_set1(1.0f);
     rs_v8m ok = rs8_and(rs8_and(rs8_ne(det, zero), rs8_ge(u, zero)),
                         rs8_and(rs8_ge(v, zero), rs8_le(rs8_add(u, v), one)));
     if (!rs8_movemask(ok))      /* the ray passes outside all eight: t is not needed */
         return 0;
-    rs_v8f t = rs8_mul(rs8_add(rs8_add(rs8_mul(e2x, qx), rs8_mul(e2y, qy)), rs8_mul(e2z, qz)), inv);
+    rs_v8f t = RS_MT_T(rs8);
     float best = r->t[i];
     /* t > tmin and t <= best; t == best with a higher id is dropped below */
     ok = rs8_and(ok, rs8_and(rs8_gt(t, rs8_set1(r->tmin[i])), rs8_le(t, rs8_set1(best))));
