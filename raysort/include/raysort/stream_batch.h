@@ -45,27 +45,42 @@ typedef struct rs_batch_status {
     int order_bad;          /* an order entry outside [0, n): nothing more traced */
 } rs_batch_status;
 
-/* Lane j's hit (of the scratch or a one-ray view), t0 its t before the walk, to
- * ray id of the batch; 1 if it breaks the hit contract (as _checks.pxd's
- * closest_bad and any_hit_bad: prim -1 or below n_prim; a closest hit in
- * (tmin, t0) with finite u, v), which the caller reports. */
+/* Whether lane j's hit (of the scratch or a one-ray view) breaks the hit
+ * contract, as _checks.pxd's closest_bad and any_hit_bad: prim -1 or below
+ * n_prim, and (unless any_hit) a hit in (tmin, t0) with finite u, v, t0 the
+ * lane's t before the walk.  Without a branch. */
+RS_INLINE int rs_batch_bad(const rs_rays *r, int j, float t0, uint32_t n_prim, int any_hit)
+{
+    const int32_t p = r->prim[j];
+    const float t = r->t[j], u = r->u[j], v = r->v[j];
+    return ((uint32_t)(p + 1) > n_prim)
+           | (!any_hit & (p >= 0)
+              & (!(r->tmin[j] < t) | !(t < t0) | ((u - u) + (v - v) != 0.0f)));
+}
+
+/* Lane j's closest hit to row `id` of the batch-order hits t, prim, u, v (a miss:
+ * inf, -1, 0, 0). */
+RS_INLINE void rs_batch_write(const rs_rays *r, int j, int64_t id, float *t, int32_t *prim,
+                              float *u, float *v)
+{
+    const int hit = r->prim[j] >= 0;
+    t[id] = hit ? r->t[j] : INFINITY;
+    prim[id] = hit ? r->prim[j] : -1;
+    u[id] = hit ? r->u[j] : 0.0f;
+    v[id] = hit ? r->v[j] : 0.0f;
+}
+
+/* Lane j's hit to ray id of the batch; 1 if it breaks the hit contract
+ * (rs_batch_bad), which the caller reports. */
 RS_INLINE int rs_batch_put(const rs_rays *r, int j, int32_t id, float t0, uint32_t n_prim,
                            rs_batch_hits *out)
 {
-    const int32_t p = r->prim[j];
-    const int hit = p >= 0;
-    int bad = (uint32_t)(p + 1) > n_prim;
     if (out->occluded) {
-        out->occluded[id] = (uint8_t)hit;
-        return bad;
+        out->occluded[id] = (uint8_t)(r->prim[j] >= 0);
+        return rs_batch_bad(r, j, t0, n_prim, 1);
     }
-    const float t = r->t[j], u = r->u[j], v = r->v[j];
-    bad |= hit & (!(r->tmin[j] < t) | !(t < t0) | ((u - u) + (v - v) != 0.0f));
-    out->t[id] = hit ? t : INFINITY;
-    out->prim[id] = hit ? p : -1;
-    out->u[id] = hit ? u : 0.0f;
-    out->v[id] = hit ? v : 0.0f;
-    return bad;
+    rs_batch_write(r, j, id, out->t, out->prim, out->u, out->v);
+    return rs_batch_bad(r, j, t0, n_prim, 0);
 }
 
 /* rs_batch_put of lanes 0 <= j < n to rays id0 + j (closest hits), in loops
@@ -76,27 +91,18 @@ RS_INLINE int rs_batch_put_run(const rs_rays *r, int n, int32_t id0, const float
                                uint32_t n_prim, rs_batch_hits *out)
 {
     int bad = 0;
-    for (int j = 0; j < n; ++j) {
-        const int32_t p = r->prim[j];
-        const float t = r->t[j], u = r->u[j], v = r->v[j];
-        bad |= ((uint32_t)(p + 1) > n_prim)
-               | ((p >= 0) & (!(r->tmin[j] < t) | !(t < t0[j]) | ((u - u) + (v - v) != 0.0f)));
-    }
+    for (int j = 0; j < n; ++j)
+        bad |= rs_batch_bad(r, j, t0[j], n_prim, 0);
     if (bad) {
         int j = 0;
         while (!rs_batch_put(r, j, id0 + j, t0[j], n_prim, out))
             ++j;
         return j;
     }
-    float *ot = out->t + id0, *ou = out->u + id0, *ov = out->v + id0;
-    int32_t *op = out->prim + id0;
-    for (int j = 0; j < n; ++j) {
-        const int hit = r->prim[j] >= 0;
-        ot[j] = hit ? r->t[j] : INFINITY;
-        op[j] = hit ? r->prim[j] : -1;
-        ou[j] = hit ? r->u[j] : 0.0f;
-        ov[j] = hit ? r->v[j] : 0.0f;
-    }
+    float *t = out->t + id0, *u = out->u + id0, *v = out->v + id0;
+    int32_t *prim = out->prim + id0;
+    for (int j = 0; j < n; ++j)
+        rs_batch_write(r, j, j, t, prim, u, v);
     return n;
 }
 
