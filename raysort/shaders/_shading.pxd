@@ -6,8 +6,10 @@ direction around that normal, and the rays written into a batch's rows.  They ar
 compiled into each shader, so they cost no call, and every shader that uses them
 makes bit for bit the same rays.
 
-A shader gathers the hits of up to ``LANES`` rays into a :c:type:`HitBlock`
-(structure of arrays, one lane per hit) and works on the whole block in loops
+A shader lists the hits of up to ``LANES`` rays in a :c:type:`HitBlock`'s ``ray``
+and ``n``, and ``take_rays``, ``take_normals`` and ``take_keys`` fill the block's
+lanes (structure of arrays, one lane per hit; copies of the rows when every ray of
+the range hit) and works on the whole block in loops
 without branches that the compiler turns into SIMD code; the same IEEE operations
 run in every lane, so a hit's new rays do not depend on its lane or its block.
 New rays are written out row by row: a batch's rows lie a whole capacity apart,
@@ -19,7 +21,9 @@ polynomial (``unit_circle``), so a shader compiled anywhere with contraction off
 (``-ffp-contract=off``, as setup.py builds) makes the same rays bit for bit.
 """
 from libc.math cimport sqrtf, fabsf
-from libc.stdint cimport int32_t
+from libc.stdint cimport int32_t, uint32_t
+from libc.string cimport memcpy
+from raysort._rng cimport sample_key
 from raysort._types cimport RS_RAY_OX, RS_RAY_DX, RS_RAY_TMIN, RS_RAY_TMAX
 
 # How far a new origin is pushed off the surface: this fraction of (1 + the
@@ -45,18 +49,59 @@ cdef struct HitBlock:
     float tmax[LANES]           # and its tmax
 
 
-cdef inline void add_hit(HitBlock *b, const float[:, ::1] rays, const float[::1] t, int i,
-                         const float *normal) noexcept nogil:
-    """Put ray ``i`` of a batch (the ``RS_RAY_*`` rows), which hit a face with this
-    ``normal``, in the next lane."""
-    cdef int h = b.n, a
-    b.ray[h] = i
-    b.t[h] = t[i]
-    for a in range(3):
-        b.o[a][h] = rays[RS_RAY_OX + a, i]
-        b.d[a][h] = rays[RS_RAY_DX + a, i]
-        b.nrm[a][h] = normal[a]
-    b.n = h + 1
+cdef inline bint consecutive(const HitBlock *b) noexcept nogil:
+    """Whether the block's lanes hold consecutive rays of their batch (every ray of
+    a range hit: the common case), so that their values are copied row by row."""
+    return b.n > 0 and b.ray[b.n - 1] - b.ray[0] == b.n - 1
+
+
+cdef inline void take_rays(HitBlock *b, const float[:, ::1] rays,
+                           const float[::1] t) noexcept nogil:
+    """Fill each lane's ``t``, origin and direction from the rays ``b.ray[:b.n]`` of a
+    batch (the ``RS_RAY_*`` rows): copies of the rows when the rays are consecutive,
+    else ray by ray."""
+    cdef int h, a, i, n = b.n
+    if consecutive(b):
+        i = b.ray[0]
+        memcpy(b.t, &t[i], n * sizeof(float))
+        for a in range(3):
+            memcpy(b.o[a], &rays[RS_RAY_OX + a, i], n * sizeof(float))
+            memcpy(b.d[a], &rays[RS_RAY_DX + a, i], n * sizeof(float))
+        return
+    for h in range(n):
+        i = b.ray[h]
+        b.t[h] = t[i]
+        for a in range(3):
+            b.o[a][h] = rays[RS_RAY_OX + a, i]
+            b.d[a][h] = rays[RS_RAY_DX + a, i]
+
+
+cdef inline void take_normals(HitBlock *b, const int32_t[::1] prim, const float *table,
+                              int stride) noexcept nogil:
+    """Fill each lane's normal from row ``prim[b.ray[h]]`` of a face table whose rows are
+    ``stride`` floats apart and start with the normal."""
+    cdef int h, a
+    cdef const float *rec
+    for h in range(b.n):
+        rec = table + <Py_ssize_t> prim[b.ray[h]] * stride
+        for a in range(3):
+            b.nrm[a][h] = rec[a]
+
+
+cdef inline void take_keys(const HitBlock *b, uint32_t seed_k, const int32_t[::1] pixel,
+                           const int32_t[::1] sample, uint32_t *key) noexcept nogil:
+    """``key[h]``: the random-number key (``sample_key``) of each lane's path, from the
+    rays' ``pixel`` and ``sample`` (in one loop over consecutive rays that the compiler
+    vectorises, when they are)."""
+    cdef int h, i
+    if consecutive(b):
+        i = b.ray[0]
+        for h in range(b.n):
+            key[h] = sample_key(seed_k, pixel[i + h], sample[i + h])
+        return
+    for h in range(b.n):
+        i = b.ray[h]
+        key[h] = sample_key(seed_k, pixel[i], sample[i])
 
 
 cdef inline void leave_surfaces(HitBlock *b) noexcept nogil:

@@ -6,9 +6,10 @@ efficiency of ray traversal on GPUs", HPG 2009, and most ray-sorting work since)
 any-hit rays, cosine distributed around the surface normal, from every primary hit.
 """
 from libc.stdint cimport int32_t, uint32_t
-from raysort._rng cimport seed_key, sample_key, uniform_at
+from raysort._rng cimport seed_key, uniform_at
 from raysort._types cimport RS_DIM_AO
-from raysort.shaders._shading cimport (LANES, HitBlock, add_hit, leave_surfaces,
+from raysort.shaders._shading cimport (LANES, HitBlock, take_rays, take_normals, take_keys,
+                                       leave_surfaces,
                                        cosine_directions, write_rays)
 
 import numpy as np
@@ -53,10 +54,13 @@ cdef int ao_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::
                 for c in range(3):
                     radiance[slot[i], c] += thr[c, i] * background
                 continue
-            key[b.n] = sample_key(seed_k, pixel[i], sample[i])
-            add_hit(&b, rays, t, i, &normals[f, 0])
+            b.ray[b.n] = i
+            b.n += 1
         if b.n == 0:
             continue
+        take_rays(&b, rays, t)
+        take_normals(&b, prim, &normals[0, 0], 3)
+        take_keys(&b, seed_k, pixel, sample, key)
         leave_surfaces(&b)
         for h in range(b.n):
             b.tmax[h] = distance

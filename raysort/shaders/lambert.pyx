@@ -2,11 +2,11 @@
 from libc.math cimport sqrtf, M_PI, INFINITY
 from libc.string cimport memcpy, memmove
 from libc.stdint cimport int32_t, uint32_t
-from raysort._rng cimport seed_key, sample_key, uniform_at
+from raysort._rng cimport seed_key, uniform_at
 from raysort._types cimport (RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX, RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE,
                              RS_MAX_DEPTH, rs_prefetch, rs_prefetchw)
-from raysort.shaders._shading cimport (LANES, HitBlock, add_hit, leave_surfaces,
-                                       cosine_directions, write_rays)
+from raysort.shaders._shading cimport (LANES, HitBlock, consecutive, take_rays, take_normals,
+                                       take_keys, leave_surfaces, cosine_directions, write_rays)
 
 import numpy as np
 
@@ -163,15 +163,29 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
             if e >= 0:
                 for c in range(3):
                     radiance[slot[i], c] += thr[c, i] * emitters[e, c]
-            h = b.n
-            for c in range(3):
-                reflect[c][h] = thr[c, i] * faces[f, FACE_ALBEDO + c]
-            hit_slot[h] = slot[i]
-            if bounce:
-                key[h] = sample_key(seed_k, pixel[i], sample[i])
-            add_hit(&b, rays, t, i, &faces[f, FACE_NORMAL])
+            b.ray[b.n] = i
+            b.n += 1
         if b.n == 0:
             continue
+        take_rays(&b, rays, t)
+        take_normals(&b, prim, &faces[0, FACE_NORMAL], FACE_FLOATS)
+        if consecutive(&b):         # every ray of the block hit: copies of the rows
+            i = b.ray[0]
+            for c in range(3):
+                memcpy(reflect[c], &thr[c, i], b.n * sizeof(float))
+            memcpy(hit_slot, &slot[i], b.n * sizeof(int32_t))
+        else:
+            for h in range(b.n):
+                i = b.ray[h]
+                for c in range(3):
+                    reflect[c][h] = thr[c, i]
+                hit_slot[h] = slot[i]
+        if bounce:
+            take_keys(&b, seed_k, pixel, sample, key)
+        for h in range(b.n):
+            f = prim[b.ray[h]]
+            for c in range(3):
+                reflect[c][h] = reflect[c][h] * faces[f, FACE_ALBEDO + c]
         leave_surfaces(&b)
         # next-event estimation toward point lights: a shadow ray per lit hit
         for L in range(light_pos.shape[0]):

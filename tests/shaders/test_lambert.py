@@ -155,3 +155,64 @@ def test_the_next_throughput_is_contiguous():
     assert 0 < len(bounce.rays) < len(first.rays)       # some rays escape the box
     assert bounce.throughput.shape == (3, len(bounce.rays))
     assert bounce.throughput.flags.c_contiguous
+
+
+@pytest.mark.parametrize("name", ["cornell", "forest"])
+def test_shade_continues_every_hit_as_numpy_computes_it(name):
+    """One ``shade`` call, held against NumPy statements of the same float32 operations
+    (lambert.pyx, _shading.pxd), on brute-force hits of which a random third are turned
+    into misses in the batch's second half, so that runs of hits (copied row by row) and
+    runs with gaps (ray by ray) both occur: each
+    hit continues in order, from its hit point pushed off the facing normal, with the
+    throughput times the face's albedo; each miss adds the sky; the cornell box's light
+    adds shadow rays from the same points."""
+    scene = raysort.load_scene(name)
+    rays = workload(scene, "primary", width=48, height=48, seed=4).rays
+    n = len(rays)
+    hits = raysort.Hits(n)
+    for a in range(0, n, MAX_PACKET):
+        part = brute_force(scene.vertices, scene.faces,
+                           rays.take(np.arange(a, min(a + MAX_PACKET, n))))
+        hits.t[a:a + len(part.t)], hits.prim[a:a + len(part.t)] = part.t, part.prim
+    rng = np.random.default_rng(9)
+    gone = (rng.random(n) < 1 / 3) & (np.arange(n) >= n // 2)
+    hits.t[gone], hits.prim[gone] = np.inf, -1
+    hit = np.flatnonzero(hits.prim >= 0)
+    runs = np.diff(np.flatnonzero(np.diff(np.r_[0, hits.prim >= 0, 0]))).max()
+    assert len(hit) > n // 2 and gone.sum() > n // 8
+    assert runs >= 2 * 64 if name == "cornell" else runs < 64    # the forest's sky: gaps
+    thr = rng.uniform(0.1, 1.0, (3, n)).astype(np.float32)
+    paths = raysort.Paths(np.arange(n), np.zeros(n), np.arange(n), thr)
+    radiance = np.zeros((n, 3))
+    shader = lambert.LambertShader()
+    bounce = shader.shade(scene, rays, hits, paths, 0, 7, radiance)
+
+    np.testing.assert_array_equal(bounce.parent, hit)
+    o, d, t = rays.origins[:, hit], rays.directions[:, hit], hits.t[hit]
+    p = o + t * d
+    nrm = scene.face_normals()[hits.prim[hit]].T.astype(np.float32)
+    facing = nrm[0] * d[0] + nrm[1] * d[1] + nrm[2] * d[2]
+    nrm = np.where(facing > 0, -nrm, nrm)
+    eps = (np.float32(1) + np.abs(p).max(axis=0)) * np.float32(1 / 8192)
+    start = p + eps * nrm
+    out = bounce.rays
+    np.testing.assert_array_equal(out.origins, start)
+    np.testing.assert_array_equal(out.tmin, 0)
+    np.testing.assert_array_equal(out.tmax, np.inf)
+    assert ((out.directions * nrm).sum(axis=0) > 0).all()
+    albedo = np.asarray(scene.albedo, np.float32)[hits.prim[hit]].T
+    np.testing.assert_array_equal(bounce.throughput, thr[:, hit] * albedo)
+    emitted = np.zeros((3, n), np.float32)
+    emitted[:, ~gone & (hits.prim >= 0)] = np.asarray(scene.emission, np.float32)[
+        hits.prim[hit]].T
+    sky = np.asarray(scene.sky, np.float32)[:, None]
+    added = np.where(hits.prim >= 0, thr * emitted, thr * sky).astype(np.float64)
+    np.testing.assert_array_equal(radiance, added.T)
+    if scene.lights:
+        shadow = bounce.shadow
+        np.testing.assert_array_equal(np.unique(shadow.parent), np.unique(shadow.parent))
+        assert set(shadow.parent) <= set(hit)
+        np.testing.assert_array_equal(shadow.rays.origins,
+                                      start[:, np.searchsorted(hit, shadow.parent)])
+    else:
+        assert bounce.shadow is None
