@@ -21,7 +21,7 @@ polynomial (``unit_circle``), so a shader compiled anywhere with contraction off
 (``-ffp-contract=off``, as setup.py builds) makes the same rays bit for bit.
 """
 from libc.math cimport sqrtf, fabsf
-from libc.stdint cimport int32_t, uint32_t
+from libc.stdint cimport int32_t, uint32_t, uint64_t
 from libc.string cimport memcpy
 from raysort._rng cimport sample_key
 from raysort._types cimport RS_RAY_OX, RS_RAY_DX, RS_RAY_TMIN, RS_RAY_TMAX
@@ -33,7 +33,11 @@ cdef enum:
     OFFSET_DENOMINATOR = 8192
 
 cdef enum:
-    LANES = 64          # the hits of a block
+    LANES = 64          # the hits of a block (a lane mask is a uint64_t)
+
+cdef extern from "raysort/lanes.h" nogil:
+    int RS_SW
+    int rs_keep32(const int32_t *src, int n, uint64_t keep, int32_t *dst)
 
 
 cdef struct HitBlock:
@@ -182,13 +186,23 @@ cdef inline void cosine_directions(HitBlock *b) noexcept nogil:
         b.w[2][h] = x * (-sgn * n0) - y * n1 + along * n2
 
 
-cdef inline void write_rays(const HitBlock *b, const int32_t *sel, int count,
+cdef inline void keep_lanes(const void *src, int n, uint64_t keep, void *dst,
+                            int count) noexcept nogil:
+    """Copy the ``count`` 4-byte values of ``src[0, n)`` whose bit is set in ``keep``, in
+    order, to ``dst`` (a compress a vector at a time, through a block-sized stage)."""
+    cdef int32_t stage[2 * LANES]
+    rs_keep32(<const int32_t *> src, n, keep, stage)
+    memcpy(dst, stage, count * sizeof(int32_t))
+
+
+cdef inline void write_rays(const HitBlock *b, uint64_t keep, int count,
                             float[:, ::1] out, int k, int step) noexcept nogil:
-    """Write the new rays (``o``, ``w``, 0, ``tmax``) of lanes ``sel[:count]`` (ascending)
-    as rays ``k, k + step, k + 2 step, ...`` of a batch's rows."""
+    """Write the new rays (``o``, ``w``, 0, ``tmax``) of the ``count`` lanes set in
+    ``keep`` as rays ``k, k + step, k + 2 step, ...`` of a batch's rows (``step`` 1
+    unless every lane makes a ray)."""
     cdef int a, j
     cdef float *row
-    if count == b.n:       # every lane: sel is 0, 1, 2, ...
+    if count == b.n:       # every lane
         for a in range(3):
             row = &out[RS_RAY_OX + a, k]
             for j in range(count):
@@ -201,15 +215,9 @@ cdef inline void write_rays(const HitBlock *b, const int32_t *sel, int count,
             row[j * step] = b.tmax[j]
     else:
         for a in range(3):
-            row = &out[RS_RAY_OX + a, k]
-            for j in range(count):
-                row[j * step] = b.o[a][sel[j]]
-            row = &out[RS_RAY_DX + a, k]
-            for j in range(count):
-                row[j * step] = b.w[a][sel[j]]
-        row = &out[RS_RAY_TMAX, k]
-        for j in range(count):
-            row[j * step] = b.tmax[sel[j]]
+            keep_lanes(b.o[a], b.n, keep, &out[RS_RAY_OX + a, k], count)
+            keep_lanes(b.w[a], b.n, keep, &out[RS_RAY_DX + a, k], count)
+        keep_lanes(b.tmax, b.n, keep, &out[RS_RAY_TMAX, k], count)
     row = &out[RS_RAY_TMIN, k]
     for j in range(count):
         row[j * step] = 0.0

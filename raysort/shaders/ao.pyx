@@ -42,9 +42,6 @@ cdef int ao_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::
     cdef uint32_t seed_k = seed_key(seed)
     cdef HitBlock b
     cdef uint32_t key[LANES]
-    cdef int32_t sel[LANES]
-    for h in range(LANES):
-        sel[h] = h
     for blk in range((n + LANES - 1) // LANES):
         i0 = blk * LANES
         b.n = 0
@@ -70,7 +67,7 @@ cdef int ao_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::
                 b.u1[h] = uniform_at(key[h], RS_DIM_AO + 2 * k)
                 b.u2[h] = uniform_at(key[h], RS_DIM_AO + 2 * k + 1)
             cosine_directions(&b)
-            write_rays(&b, sel, b.n, ao_rays, m + k, samples)
+            write_rays(&b, 0, b.n, ao_rays, m + k, samples)   # every lane
         for h in range(b.n):
             i = b.ray[h]
             for k in range(samples):

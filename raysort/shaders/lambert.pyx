@@ -1,12 +1,13 @@
 """``lambert``: a Lambertian path tracer (cosine-weighted diffuse bounces)."""
 from libc.math cimport sqrtf, M_PI, INFINITY
 from libc.string cimport memcpy, memmove
-from libc.stdint cimport int32_t, uint32_t
+from libc.stdint cimport int32_t, uint32_t, uint64_t
 from raysort._rng cimport seed_key, uniform_at
 from raysort._types cimport (RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX, RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE,
                              RS_MAX_DEPTH, rs_prefetch, rs_prefetchw)
 from raysort.shaders._shading cimport (LANES, HitBlock, consecutive, take_rays, take_normals,
-                                       take_keys, leave_surfaces, cosine_directions, write_rays)
+                                       take_keys, leave_surfaces, cosine_directions, keep_lanes,
+                                       write_rays)
 
 import numpy as np
 
@@ -117,7 +118,8 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
     cdef float weight[LANES]           # a shadow ray's BRDF * cosine / distance^2
     cdef uint32_t key[LANES]           # the path's random-number key
     cdef int32_t ok[LANES]             # 1 where the lane's shadow ray is made
-    cdef int32_t sel[LANES]            # the lanes that make a ray, ascending
+    cdef uint64_t keep                 # the lanes that make a ray (bit h: lane h)
+    cdef float lit[LANES]              # a shadow ray's contribution, lane by lane
     cdef int32_t hit_slot[LANES]       # the path's accumulator row
     cdef float *row
     for blk in range((n + LANES - 1) // LANES):
@@ -207,14 +209,15 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                 b.tmax[h] = dist
                 # BRDF (albedo / pi) * cos(light, normal) / distance^2
                 weight[h] = cosl * inv_dist * inv_pi / dist2
+            keep = 0
             count = 0
             for h in range(b.n):
-                sel[count] = h
+                keep |= <uint64_t> ok[h] << h
                 count += ok[h]
             if count == 0:
                 continue
-            write_rays(&b, sel, count, sh_rays, m, 1)
-            if count == b.n:        # every lane (sel is 0, 1, 2, ...): loops without sel
+            write_rays(&b, keep, count, sh_rays, m, 1)
+            if count == b.n:        # every lane: copies
                 for c in range(3):
                     intensity = light_int[L, c]
                     row = &sh_contrib[c, m]
@@ -222,15 +225,14 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                         row[j] = reflect[c][j] * intensity * weight[j]
                 memcpy(&sh_parent[m], b.ray, count * sizeof(int32_t))
                 memcpy(&sh_slot[m], hit_slot, count * sizeof(int32_t))
-            else:
+            else:                   # the lit lanes, a vector at a time
                 for c in range(3):
                     intensity = light_int[L, c]
-                    row = &sh_contrib[c, m]
-                    for j in range(count):
-                        row[j] = reflect[c][sel[j]] * intensity * weight[sel[j]]
-                for j in range(count):
-                    sh_parent[m + j] = b.ray[sel[j]]
-                    sh_slot[m + j] = hit_slot[sel[j]]
+                    for j in range(b.n):
+                        lit[j] = reflect[c][j] * intensity * weight[j]
+                    keep_lanes(lit, b.n, keep, &sh_contrib[c, m], count)
+                keep_lanes(b.ray, b.n, keep, &sh_parent[m], count)
+                keep_lanes(hit_slot, b.n, keep, &sh_slot[m], count)
             m += count
         if not bounce:
             continue
@@ -240,6 +242,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
             b.u2[h] = uniform_at(key[h], dim + 1)
             b.tmax[h] = INFINITY
         cosine_directions(&b)
+        keep = 0
         count = 0
         for h in range(b.n):
             if roulette:
@@ -252,22 +255,19 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                     continue
                 for c in range(3):
                     reflect[c][h] = reflect[c][h] / q
-            sel[count] = h
+            keep |= <uint64_t> 1 << h
             count += 1
         if count == 0:
             continue
-        write_rays(&b, sel, count, next_rays, k, 1)
+        write_rays(&b, keep, count, next_rays, k, 1)
         if count == b.n:            # every lane: copies
             for c in range(3):
                 memcpy(&next_thr[c, k], reflect[c], count * sizeof(float))
             memcpy(&next_parent[k], b.ray, count * sizeof(int32_t))
         else:
             for c in range(3):
-                row = &next_thr[c, k]
-                for j in range(count):
-                    row[j] = reflect[c][sel[j]]
-            for j in range(count):
-                next_parent[k + j] = b.ray[sel[j]]
+                keep_lanes(reflect[c], b.n, keep, &next_thr[c, k], count)
+            keep_lanes(b.ray, b.n, keep, &next_parent[k], count)
         k += count
     n_next[0] = k
     n_shadow[0] = m

@@ -158,14 +158,14 @@ def test_the_next_throughput_is_contiguous():
 
 
 @pytest.mark.parametrize("name", ["cornell", "forest"])
-def test_shade_continues_every_hit_as_numpy_computes_it(name):
-    """One ``shade`` call, held against NumPy statements of the same float32 operations
-    (lambert.pyx, _shading.pxd), on brute-force hits of which a random third are turned
-    into misses in the batch's second half, so that runs of hits (copied row by row) and
-    runs with gaps (ray by ray) both occur: each
-    hit continues in order, from its hit point pushed off the facing normal, with the
-    throughput times the face's albedo; each miss adds the sky; the cornell box's light
-    adds shadow rays from the same points."""
+def test_shade_continues_every_hit_as_numpy_computes_it(each_isa, name):
+    """One ``shade`` call on every ISA, held against NumPy statements of the same
+    float32 operations (lambert.pyx, _shading.pxd), on brute-force hits of which a random
+    third in the batch's second half are turned into misses, so that runs of hits
+    (copied row by row) and runs with gaps (ray by ray) both occur.  Each hit continues
+    in order, from its hit point pushed off the facing normal, with the throughput times
+    the face's albedo; each miss adds the sky; the cornell box's light adds a shadow ray
+    from the same point for each hit it lights, with its weight."""
     scene = raysort.load_scene(name)
     rays = workload(scene, "primary", width=48, height=48, seed=4).rays
     n = len(rays)
@@ -208,11 +208,26 @@ def test_shade_continues_every_hit_as_numpy_computes_it(name):
     sky = np.asarray(scene.sky, np.float32)[:, None]
     added = np.where(hits.prim >= 0, thr * emitted, thr * sky).astype(np.float64)
     np.testing.assert_array_equal(radiance, added.T)
-    if scene.lights:
+    if scene.lights:                # one point light: a shadow ray per lit hit
+        (light,) = scene.lights
+        pos = np.asarray(light.position, np.float32)[:, None]
+        w = pos - start
+        dist2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
+        cosl = w[0] * nrm[0] + w[1] * nrm[1] + w[2] * nrm[2]
+        lit = (cosl > 0) & (dist2 > 0)
+        assert 0 < lit.sum() < len(lit)
+        dist = np.sqrt(dist2)
+        inv = np.float32(1) / dist
+        weight = cosl * inv * np.float32(1 / np.pi) / dist2
         shadow = bounce.shadow
-        np.testing.assert_array_equal(np.unique(shadow.parent), np.unique(shadow.parent))
-        assert set(shadow.parent) <= set(hit)
-        np.testing.assert_array_equal(shadow.rays.origins,
-                                      start[:, np.searchsorted(hit, shadow.parent)])
+        np.testing.assert_array_equal(shadow.parent, hit[lit])
+        np.testing.assert_array_equal(shadow.slot, hit[lit])      # slot i is path i's
+        np.testing.assert_array_equal(shadow.rays.origins, start[:, lit])
+        np.testing.assert_array_equal(shadow.rays.directions, (w * inv)[:, lit])
+        np.testing.assert_array_equal(shadow.rays.tmin, 0)
+        np.testing.assert_array_equal(shadow.rays.tmax, dist[lit])
+        intensity = np.asarray(light.intensity, np.float32)[:, None]
+        np.testing.assert_array_equal(shadow.contribution,
+                                      (thr[:, hit] * albedo * intensity * weight)[:, lit])
     else:
         assert bounce.shadow is None

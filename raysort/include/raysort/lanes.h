@@ -379,4 +379,20 @@ RS_INLINE float sw_hmax(rs_swf a) { return a; }
 RS_INLINE float sw_hmin(rs_swf a) { return a; }
 #endif
 
+/* The values of src[0, n) whose bit is set in `keep` (bit h for src[h]; n <=
+ * 64), in order, to dst, which has RS_SW slots of slack; returns how many.
+ * RS_SW lanes at a time by sw_append (a compress on AVX-512): the shaders' new
+ * rays of the lanes that make one. */
+RS_INLINE int rs_keep32(const int32_t *src, int n, uint64_t keep, int32_t *dst)
+{
+    int m = 0, i = 0;
+    for (; i + RS_SW <= n; i += RS_SW)
+        sw_append(dst, &m, sw_ids(src + i), (int)((keep >> i) & ((UINT64_C(1) << RS_SW) - 1)));
+    for (; i < n; ++i) {
+        dst[m] = src[i];
+        m += (int)((keep >> i) & 1);
+    }
+    return m;
+}
+
 #endif
