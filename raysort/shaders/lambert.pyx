@@ -5,9 +5,9 @@ from libc.stdint cimport int32_t, uint32_t, uint64_t
 from raysort._rng cimport seed_key, uniform_at
 from raysort._types cimport (RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX, RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE,
                              RS_MAX_DEPTH, rs_prefetch, rs_prefetchw)
-from raysort.shaders._shading cimport (LANES, HitBlock, consecutive, take_rays, take_normals,
-                                       take_keys, leave_surfaces, cosine_directions, keep_lanes,
-                                       write_rays)
+from raysort.shaders._shading cimport (LANES, RS_SW, HitBlock, consecutive, take_rays,
+                                       take_keys, rs_list_valid, rs_record_columns, leave_surfaces,
+                                       cosine_directions, keep_lanes, write_rays)
 
 import numpy as np
 
@@ -70,6 +70,13 @@ def _face_records(const float[:, ::1] normals, const float[:, ::1] albedo,
         raise ValueError(f"_face_records: emitters has {k} rows, not one per emitting face")
 
 
+# the record columns the shader reads per hit: the normal, the albedo, the emitter row
+cdef enum:
+    RECORD_READ = 7
+cdef int RECORD_COLUMNS[RECORD_READ]
+RECORD_COLUMNS[:] = [FACE_NORMAL, FACE_NORMAL + 1, FACE_NORMAL + 2,
+                     FACE_ALBEDO, FACE_ALBEDO + 1, FACE_ALBEDO + 2, FACE_EMITTER]
+
 #: the face record's layout, for Python (tests)
 FACE_LAYOUT = dict(normal=FACE_NORMAL, emitter=FACE_EMITTER, albedo=FACE_ALBEDO,
                    floats=FACE_FLOATS)
@@ -119,9 +126,22 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
     cdef uint32_t key[LANES]           # the path's random-number key
     cdef int32_t ok[LANES]             # 1 where the lane's shadow ray is made
     cdef uint64_t keep                 # the lanes that make a ray (bit h: lane h)
+    cdef int32_t face[LANES]           # the face each lane's ray hit
+    cdef float albedo[3][LANES]        # and its albedo
+    cdef int32_t emitter[LANES]        # and its row of the emitters' table (-1: none)
+    cdef float *columns[RECORD_READ]   # where rs_record_columns puts a record's columns
+    cdef int32_t iota[LANES]           # 0, 1, 2, ...
+    cdef int nb
+    cdef bint special
     cdef float lit[LANES]              # a shadow ray's contribution, lane by lane
     cdef int32_t hit_slot[LANES]       # the path's accumulator row
     cdef float *row
+    for c in range(3):
+        columns[c] = b.nrm[c]
+        columns[3 + c] = albedo[c]
+    columns[6] = <float *> emitter
+    for h in range(LANES):
+        iota[h] = h
     for blk in range((n + LANES - 1) // LANES):
         i0 = blk * LANES
         # Prefetches (hints; the results do not depend on them).  The kernel reads
@@ -153,24 +173,35 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
         for i in range(i0 + LANES, min(i0 + 2 * LANES, n)):
             if prim[i] >= 0:
                 rs_prefetch(&faces[prim[i], 0])
-        # the hits of the next LANES rays into a block; misses add the sky, emitters their light
-        b.n = 0
-        for i in range(i0, min(i0 + LANES, n)):
-            f = prim[i]
-            if f < 0:
-                for c in range(3):
-                    radiance[slot[i], c] += thr[c, i] * sky[c]
-                continue
-            e = (<const int32_t *> &faces[f, 0])[FACE_EMITTER]
-            if e >= 0:
-                for c in range(3):
-                    radiance[slot[i], c] += thr[c, i] * emitters[e, c]
-            b.ray[b.n] = i
-            b.n += 1
+        # the hits of the next LANES rays into a block, listed a vector at a time, with
+        # their faces' records; then, in ray order, misses add the sky and emitters
+        # their light (a block's sums in the same order as ray by ray)
+        nb = min(LANES, n - i0)
+        b.n = rs_list_valid(&prim[i0], nb, iota, b.ray, face)
+        if b.n:
+            for h in range(b.n):
+                b.ray[h] += i0
+            for h in range(b.n, (b.n + RS_SW - 1) // RS_SW * RS_SW):
+                face[h] = face[0]       # whole lane groups are read
+            rs_record_columns(&faces[0, 0], face, b.n, RECORD_COLUMNS, RECORD_READ, columns)
+        special = b.n < nb
+        for h in range(b.n):
+            special |= emitter[h] >= 0
+        if special:
+            h = 0
+            for i in range(i0, i0 + nb):
+                if prim[i] < 0:
+                    for c in range(3):
+                        radiance[slot[i], c] += thr[c, i] * sky[c]
+                    continue
+                e = emitter[h]
+                h += 1
+                if e >= 0:
+                    for c in range(3):
+                        radiance[slot[i], c] += thr[c, i] * emitters[e, c]
         if b.n == 0:
             continue
         take_rays(&b, rays, t)
-        take_normals(&b, prim, &faces[0, FACE_NORMAL], FACE_FLOATS)
         if consecutive(&b):         # every ray of the block hit: copies of the rows
             i = b.ray[0]
             for c in range(3):
@@ -184,10 +215,9 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                 hit_slot[h] = slot[i]
         if bounce:
             take_keys(&b, seed_k, pixel, sample, key)
-        for h in range(b.n):
-            f = prim[b.ray[h]]
-            for c in range(3):
-                reflect[c][h] = reflect[c][h] * faces[f, FACE_ALBEDO + c]
+        for c in range(3):
+            for h in range(b.n):
+                reflect[c][h] = reflect[c][h] * albedo[c][h]
         leave_surfaces(&b)
         # next-event estimation toward point lights: a shadow ray per lit hit
         for L in range(light_pos.shape[0]):

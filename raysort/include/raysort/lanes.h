@@ -379,6 +379,44 @@ RS_INLINE float sw_hmax(rs_swf a) { return a; }
 RS_INLINE float sw_hmin(rs_swf a) { return a; }
 #endif
 
+/* The lanes h of [0, n) where ids[h] >= 0, in order: lane[h] to pos and ids[h]
+ * to out (each with RS_SW slots of slack); returns how many.  RS_SW lanes at a
+ * time by sw_append: the shaders' hits (prim >= 0) of a block of rays. */
+RS_INLINE int rs_list_valid(const int32_t *ids, int n, const int32_t *lane, int32_t *pos,
+                            int32_t *out)
+{
+    int m = 0, i = 0;
+    const int all = (int)((UINT64_C(1) << RS_SW) - 1);
+    for (; i + RS_SW <= n; i += RS_SW) {
+        rs_swi id = sw_ids(ids + i);
+        int bits = ~sw_bits(sw_lti(id, sw_set1i(0))) & all;
+        int k = m;
+        sw_append(pos, &k, sw_ids(lane + i), bits);
+        sw_append(out, &m, id, bits);
+    }
+    for (; i < n; ++i) {
+        pos[m] = lane[i];
+        out[m] = ids[i];
+        m += ids[i] >= 0;
+    }
+    return m;
+}
+
+/* Columns cols[0, k) (each < 8) of the 8-float records table + 8 * rows[h], for
+ * h in [0, n), into out[c][h]: RS_SW records at a time by sw_rows8 (gathers on
+ * AVX-512, a transpose of the rows on AVX2).  Lanes up to n rounded up to RS_SW
+ * are read and written: rows[] holds valid rows there too. */
+RS_INLINE void rs_record_columns(const float *table, const int32_t *rows, int n,
+                                 const int *cols, int k, float *const *out)
+{
+    for (int h = 0; h < n; h += RS_SW) {
+        rs_swf rec[8];
+        sw_rows8(table, 8, sw_ids(rows + h), rec);
+        for (int c = 0; c < k; ++c)
+            sw_store(out[c] + h, rec[cols[c]]);
+    }
+}
+
 /* The values of src[0, n) whose bit is set in `keep` (bit h for src[h]; n <=
  * 64), in order, to dst, which has RS_SW slots of slack; returns how many.
  * RS_SW lanes at a time by sw_append (a compress on AVX-512): the shaders' new
