@@ -38,6 +38,7 @@ cdef enum:
 cdef extern from "raysort/lanes.h" nogil:
     int RS_SW
     int rs_keep32(const int32_t *src, int n, uint64_t keep, int32_t *dst)
+    uint64_t rs_mask64(const int32_t *flag, int n)
     int rs_list_valid(const int32_t *ids, int n, const int32_t *lane, int32_t *pos,
                       int32_t *out)
     void rs_record_columns(const float *table, const int32_t *rows, int n, const int *cols,

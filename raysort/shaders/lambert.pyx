@@ -6,8 +6,9 @@ from raysort._rng cimport seed_key, uniform_at
 from raysort._types cimport (RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX, RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE,
                              RS_MAX_DEPTH, rs_prefetch, rs_prefetchw)
 from raysort.shaders._shading cimport (LANES, RS_SW, HitBlock, consecutive, take_rays,
-                                       take_keys, rs_list_valid, rs_record_columns, leave_surfaces,
-                                       cosine_directions, keep_lanes, write_rays)
+                                       take_keys, rs_mask64, rs_list_valid,
+                                       rs_record_columns, leave_surfaces, cosine_directions,
+                                       keep_lanes, write_rays)
 
 import numpy as np
 
@@ -239,10 +240,9 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                 b.tmax[h] = dist
                 # BRDF (albedo / pi) * cos(light, normal) / distance^2
                 weight[h] = cosl * inv_dist * inv_pi / dist2
-            keep = 0
+            keep = rs_mask64(ok, b.n)
             count = 0
             for h in range(b.n):
-                keep |= <uint64_t> ok[h] << h
                 count += ok[h]
             if count == 0:
                 continue
@@ -272,10 +272,11 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
             b.u2[h] = uniform_at(key[h], dim + 1)
             b.tmax[h] = INFINITY
         cosine_directions(&b)
-        keep = 0
-        count = 0
-        for h in range(b.n):
-            if roulette:
+        keep = 0                    # (unused when every lane goes on)
+        count = b.n
+        if roulette:
+            count = 0
+            for h in range(b.n):
                 best = reflect[0][h]
                 for c in range(1, 3):
                     if reflect[c][h] > best:
@@ -285,8 +286,8 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                     continue
                 for c in range(3):
                     reflect[c][h] = reflect[c][h] / q
-            keep |= <uint64_t> 1 << h
-            count += 1
+                keep |= <uint64_t> 1 << h
+                count += 1
         if count == 0:
             continue
         write_rays(&b, keep, count, next_rays, k, 1)

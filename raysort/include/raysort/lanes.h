@@ -417,6 +417,19 @@ RS_INLINE void rs_record_columns(const float *table, const int32_t *rows, int n,
     }
 }
 
+/* The lanes h of [0, n) (n <= 64) whose flag[h] is not 0, as bit h of a mask:
+ * RS_SW lanes at a time (one comparison each). */
+RS_INLINE uint64_t rs_mask64(const int32_t *flag, int n)
+{
+    uint64_t mask = 0;
+    int i = 0;
+    for (; i + RS_SW <= n; i += RS_SW)
+        mask |= (uint64_t)(uint32_t)sw_bits(sw_lti(sw_set1i(0), sw_ids(flag + i))) << i;
+    for (; i < n; ++i)
+        mask |= (uint64_t)(flag[i] != 0) << i;
+    return mask;
+}
+
 /* The values of src[0, n) whose bit is set in `keep` (bit h for src[h]; n <=
  * 64), in order, to dst, which has RS_SW slots of slack; returns how many.
  * RS_SW lanes at a time by sw_append (a compress on AVX-512): the shaders' new
