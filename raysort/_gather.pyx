@@ -21,6 +21,11 @@ cdef extern from "raysort/gather.h" nogil:
                             const int32_t *index, int64_t capacity, int64_t n_src)
 
 
+cdef extern from "raysort/lanes.h" nogil:
+    int rs_zero_bytes16(const uint8_t *p)
+    int rs_lowest(int bits)
+
+
 cdef enum:
     UNWRITTEN = -2          # prim of a ray no lane was scattered to (see scatter_each)
     UNWRITTEN_OCCLUDED = 2  # the same for an any-hit query's flags
@@ -342,12 +347,11 @@ def scatter_each(const float[:, ::1] rows, const int32_t[::1] prim, const float[
 def add_unoccluded(double[:, ::1] radiance, const int32_t[::1] slot,
                    const float[:, :] contribution, const unsigned char[::1] occluded):
     """``radiance[slot[i]] += contribution[:, i]`` for every ray i not occluded, in order
-    (what ``np.add.at`` does, without its per-element overhead).  An occluded ray adds
-    -0.0, which leaves every float as it is (even -0.0), so the loop has no branch for
-    a test that goes either way at random."""
-    cdef Py_ssize_t i, n = slot.shape[0], rows = radiance.shape[0], step
-    cdef int bad = 0
-    cdef bint lit
+    (what ``np.add.at`` does, without its per-element overhead).  The unoccluded rays of
+    every 16 are found by one comparison and visited by their bits, so the loop has no
+    branch for a test that goes either way at random."""
+    cdef Py_ssize_t i, j, n = slot.shape[0], rows = radiance.shape[0], step
+    cdef int bad = 0, lit
     cdef double *row
     cdef const float *c0
     cdef const float *c1
@@ -368,12 +372,23 @@ def add_unoccluded(double[:, ::1] radiance, const int32_t[::1] slot,
     step = contribution.strides[1] // sizeof(float)
     c0, c1, c2 = &contribution[0, 0], &contribution[1, 0], &contribution[2, 0]
     with nogil:
-        for i in range(n):
-            lit = occluded[i] == 0
-            row = &radiance[0, 0] + 3 * slot[i]
-            row[0] += c0[i * step] if lit else -0.0
-            row[1] += c1[i * step] if lit else -0.0
-            row[2] += c2[i * step] if lit else -0.0
+        i = 0
+        while i + 16 <= n:
+            lit = rs_zero_bytes16(&occluded[i])
+            while lit:
+                j = i + rs_lowest(lit)
+                lit &= lit - 1
+                row = &radiance[0, 0] + 3 * slot[j]
+                row[0] += c0[j * step]
+                row[1] += c1[j * step]
+                row[2] += c2[j * step]
+            i += 16
+        for j in range(i, n):
+            if occluded[j] == 0:
+                row = &radiance[0, 0] + 3 * slot[j]
+                row[0] += c0[j * step]
+                row[1] += c1[j * step]
+                row[2] += c2[j * step]
 
 
 def compiled_isa():

@@ -438,9 +438,9 @@ def test_scatter_occluded(gathered):
 
 # -- shadow-ray radiance --------------------------------------------------------------
 
-def test_add_unoccluded_is_np_add_at():
+def test_add_unoccluded_is_np_add_at(each_isa):
     """The same float64 sums as ``np.add.at`` (same order, repeated slots included), bit for
-    bit, whatever sums it starts from."""
+    bit, whatever sums it starts from, on every ISA (whole groups of 16 rays and a tail)."""
     rng = np.random.default_rng(5)
     m, slots = 5000, 37
     slot = rng.integers(0, slots, m).astype(np.int32)

@@ -417,6 +417,21 @@ RS_INLINE void rs_record_columns(const float *table, const int32_t *rows, int n,
     }
 }
 
+/* Bit k set where p[k] == 0, for the 16 bytes at p: one SSE2 comparison where
+ * there is SSE2 (add_unoccluded's unoccluded shadow rays). */
+RS_INLINE int rs_zero_bytes16(const uint8_t *p)
+{
+#if RS_SSE
+    return _mm_movemask_epi8(_mm_cmpeq_epi8(_mm_loadu_si128((const __m128i *)p),
+                                            _mm_setzero_si128()));
+#else
+    int bits = 0;
+    for (int k = 0; k < 16; ++k)
+        bits |= (p[k] == 0) << k;
+    return bits;
+#endif
+}
+
 /* The lanes h of [0, n) (n <= 64) whose flag[h] is not 0, as bit h of a mask:
  * RS_SW lanes at a time (one comparison each). */
 RS_INLINE uint64_t rs_mask64(const int32_t *flag, int n)
