@@ -27,6 +27,9 @@ cdef extern from "raysort/lanes.h" nogil:
 
 
 cdef enum:
+    RUN = 64                # parents follow_paths checks for a consecutive run at once
+
+cdef enum:
     UNWRITTEN = -2          # prim of a ray no lane was scattered to (see scatter_each)
     UNWRITTEN_OCCLUDED = 2  # the same for an any-hit query's flags
 
@@ -107,12 +110,13 @@ def follow_paths(const int32_t[::1] parent, const int32_t[::1] pixel,
                  const int32_t[::1] sample, const int32_t[::1] slot, const float[::1] t):
     """``(pixel, sample, slot, t)`` of the rays ``parent`` (each an index into the four
     arrays): the paths a shader's next rays continue and the hit distance each path
-    ended its last ray at, in one pass (``Paths.take`` and ``t[parent]``).  IndexError,
-    with nothing returned, at a parent out of range."""
-    cdef Py_ssize_t i, m = parent.shape[0]
+    ended its last ray at, in one pass (``Paths.take`` and ``t[parent]``); a run of 64
+    consecutive parents is copied row by row.  IndexError, with nothing returned, at a
+    parent out of range."""
+    cdef Py_ssize_t i, e, k, m = parent.shape[0]
     cdef uint32_t n = pixel.shape[0]
     cdef int32_t p
-    cdef int bad = 0
+    cdef int bad = 0, run
     if sample.shape[0] != n or slot.shape[0] != n or t.shape[0] != n:
         raise ValueError("follow_paths: pixel, sample, slot and t must be of one length")
     new_pixel = np.empty(m, dtype=np.int32)
@@ -122,15 +126,35 @@ def follow_paths(const int32_t[::1] parent, const int32_t[::1] pixel,
     cdef int32_t[::1] o_pixel = new_pixel, o_sample = new_sample, o_slot = new_slot
     cdef float[::1] o_t = new_t
     with nogil:
-        for i in range(m):
+        i = 0
+        while i < m:
             p = parent[i]
-            if <uint32_t> p >= n:
-                bad = 1
+            e = min(i + RUN, m)
+            # a run of consecutive parents (every ray before it went on): copies
+            run = (e - i == RUN and <uint32_t> p < n and <uint32_t> p + RUN <= n
+                   and parent[e - 1] == p + RUN - 1)
+            if run:
+                for k in range(RUN):
+                    run &= parent[i + k] == p + k
+            if run:
+                memcpy(&o_pixel[i], &pixel[p], RUN * sizeof(int32_t))
+                memcpy(&o_sample[i], &sample[p], RUN * sizeof(int32_t))
+                memcpy(&o_slot[i], &slot[p], RUN * sizeof(int32_t))
+                memcpy(&o_t[i], &t[p], RUN * sizeof(float))
+                i = e
+                continue
+            for i in range(i, e):
+                p = parent[i]
+                if <uint32_t> p >= n:
+                    bad = 1
+                    break
+                o_pixel[i] = pixel[p]
+                o_sample[i] = sample[p]
+                o_slot[i] = slot[p]
+                o_t[i] = t[p]
+            if bad:
                 break
-            o_pixel[i] = pixel[p]
-            o_sample[i] = sample[p]
-            o_slot[i] = slot[p]
-            o_t[i] = t[p]
+            i = e
     if bad:
         raise IndexError(f"follow_paths: parent[{i}] = {parent[i]} is out of range 0..{n - 1}")
     return new_pixel, new_sample, new_slot, new_t

@@ -267,7 +267,8 @@ def test_sample_paths_is_tile_and_repeat(n, k):
 
 def test_follow_paths_is_fancy_indexing_and_refuses_a_parent_out_of_range():
     """The paths' bookkeeping after a shade: pixel, sample, slot and t of each parent,
-    as NumPy's indexing gives them; a parent out of range is an IndexError."""
+    as NumPy's indexing gives them (runs of consecutive parents, which are copied, and
+    what only looks like one included); a parent out of range is an IndexError."""
     from raysort._gather import follow_paths
 
     rng = np.random.default_rng(5)
@@ -275,7 +276,12 @@ def test_follow_paths_is_fancy_indexing_and_refuses_a_parent_out_of_range():
     pixel, sample, slot = (rng.integers(0, 2**31 - 1, n).astype(np.int32) for _ in range(3))
     t = rng.random(n).astype(np.float32)
     t[::7] = np.inf
-    for parent in (np.sort(rng.integers(0, n, 700)), np.arange(n), np.zeros(0)):
+    swapped = np.arange(64)
+    swapped[[1, 2]] = 2, 1                      # first and last 63 apart, yet not a run
+    runs = np.concatenate([np.arange(128), np.arange(200, 330), [400, 402],
+                           np.arange(500, 564), np.arange(n - 64, n)])
+    for parent in (np.sort(rng.integers(0, n, 700)), np.arange(n), np.zeros(0), runs,
+                   swapped, np.r_[swapped, np.arange(64, 200)]):
         parent = parent.astype(np.int32)
         got = follow_paths(parent, pixel, sample, slot, t)
         for mine, array in zip(got, (pixel, sample, slot, t)):
@@ -283,6 +289,10 @@ def test_follow_paths_is_fancy_indexing_and_refuses_a_parent_out_of_range():
     for bad in (-1, n):
         with pytest.raises(IndexError, match="out of range"):
             follow_paths(np.array([0, bad], np.int32), pixel, sample, slot, t)
+        almost = np.arange(64, dtype=np.int32)
+        almost[10] = bad                        # inside what begins like a run
+        with pytest.raises(IndexError, match=r"parent\[10\]"):
+            follow_paths(almost, pixel, sample, slot, t)
 
 
 @pytest.mark.parametrize("any_hit", [False, True])
