@@ -7,9 +7,11 @@ compiled into each shader, so they cost no call, and every shader that uses them
 makes bit for bit the same rays.
 
 A shader lists the hits of up to ``LANES`` rays in a :c:type:`HitBlock`'s ``ray``
-and ``n``, and ``take_rays``, ``take_normals`` and ``take_keys`` fill the block's
-lanes (structure of arrays, one lane per hit; copies of the rows when every ray of
-the range hit) and works on the whole block in loops
+and ``n``, and ``take_rays`` and ``take_keys`` fill the block's lanes (structure of
+arrays, one lane per hit; copies of the rows when every ray of the range hit), the
+normals too with ``take_normals`` or from the shader's own face records (lambert
+reads its records a vector at a time: ``rs_record_columns``), and works on the whole
+block in loops
 without branches that the compiler turns into SIMD code; the same IEEE operations
 run in every lane, so a hit's new rays do not depend on its lane or its block.
 New rays are written out row by row: a batch's rows lie a whole capacity apart,
@@ -43,6 +45,43 @@ cdef extern from "raysort/lanes.h" nogil:
                       int32_t *out)
     void rs_record_columns(const float *table, const int32_t *rows, int n, const int *cols,
                            int k, float *const *out)
+
+
+cdef inline Py_ssize_t checked_hits(str shader, const float[:, ::1] rays, const float[::1] t,
+                                    const int32_t[::1] prim, const int32_t[::1] pixel,
+                                    const int32_t[::1] sample, const int32_t[::1] slot,
+                                    const float[:, ::1] thr, Py_ssize_t n_faces,
+                                    const double[:, ::1] radiance) except -1:
+    """How many of the n rays hit something, after checking what a shader's kernel reads
+    (its caller's input, so a shader called from a script cannot read or write outside
+    its arrays): the hits' and paths' arrays hold the n rays, every ``prim`` is -1 or a
+    face of the scene (fewer than ``n_faces``) and every ``slot`` a row of ``radiance``.
+    ValueError, naming the shader and the argument, otherwise.  One pass over prim and
+    slot, the one that counts the hits."""
+    cdef Py_ssize_t i, n = prim.shape[0], rows = radiance.shape[0], hits = 0
+    cdef int bad = 0
+    if rays.shape[0] < RS_RAY_TMAX + 1 or rays.shape[1] < n:
+        raise ValueError(f"{shader}: the rays' rows must hold the {n} rays of hits.prim")
+    if t.shape[0] != n or pixel.shape[0] != n or sample.shape[0] != n or slot.shape[0] != n \
+            or thr.shape[0] != 3 or thr.shape[1] != n:
+        raise ValueError(f"{shader}: hits.t and paths.pixel, sample, slot and throughput "
+                         f"(3, n) must hold the {n} rays of hits.prim")
+    if radiance.shape[1] != 3:
+        raise ValueError(f"{shader}: radiance must be (slots, 3), got "
+                         f"({rows}, {radiance.shape[1]})")
+    with nogil:
+        for i in range(n):
+            hits += prim[i] >= 0
+            bad |= (prim[i] >= n_faces) | (<size_t> slot[i] >= <size_t> rows)
+    if bad:
+        for i in range(n):
+            if prim[i] >= n_faces:
+                raise ValueError(f"{shader}: hits.prim[{i}] = {prim[i]} is not a face of the "
+                                 f"scene's {n_faces}")
+            if not 0 <= slot[i] < rows:
+                raise ValueError(f"{shader}: paths.slot[{i}] = {slot[i]} is not a row of "
+                                 f"radiance (0..{rows - 1})")
+    return hits
 
 
 cdef struct HitBlock:

@@ -8,9 +8,9 @@ any-hit rays, cosine distributed around the surface normal, from every primary h
 from libc.stdint cimport int32_t, uint32_t
 from raysort._rng cimport seed_key, uniform_at
 from raysort._types cimport RS_DIM_AO
-from raysort.shaders._shading cimport (LANES, HitBlock, take_rays, take_normals, take_keys,
-                                       leave_surfaces,
-                                       cosine_directions, write_rays)
+from raysort.shaders._shading cimport (LANES, HitBlock, checked_hits, take_rays, take_normals,
+                                       take_keys, leave_surfaces, cosine_directions,
+                                       write_rays)
 
 import numpy as np
 
@@ -135,6 +135,8 @@ class AOShader(Shader):
         if self._prepared is None or self._prepared[0] is not scene:
             self.prepare(scene)
         _, normals, distance = self._prepared
+        checked_hits("ao", rays.data, hits.t, hits.prim, paths.pixel, paths.sample, paths.slot,
+                     paths.throughput, len(normals), radiance)
         n = len(rays)
         m_max = n * self.samples
         ao_rays = RayBatch._unfilled(m_max)      # _ao writes every row of its rays

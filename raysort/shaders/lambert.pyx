@@ -5,8 +5,8 @@ from libc.stdint cimport int32_t, uint32_t, uint64_t
 from raysort._rng cimport seed_key, uniform_at
 from raysort._types cimport (RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX, RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE,
                              RS_MAX_DEPTH, rs_prefetch, rs_prefetchw)
-from raysort.shaders._shading cimport (LANES, RS_SW, HitBlock, consecutive, take_rays,
-                                       take_keys, rs_mask64, rs_list_valid,
+from raysort.shaders._shading cimport (LANES, RS_SW, HitBlock, checked_hits, consecutive,
+                                       take_rays, take_keys, rs_mask64, rs_list_valid,
                                        rs_record_columns, leave_surfaces, cosine_directions,
                                        keep_lanes, write_rays)
 
@@ -317,17 +317,6 @@ def _pack_rows(float[::1] flat, Py_ssize_t rows, Py_ssize_t n):
     return np.asarray(flat)[:rows * n].reshape(rows, n)
 
 
-def _count_hits(const int32_t[::1] prim):
-    """How many of the rays hit something (``prim >= 0``): each makes at most one bounce
-    ray and one shadow ray per light, so the new batches are made no larger (a larger
-    one would have its unused lanes written as padding when it is cut to its rays)."""
-    cdef Py_ssize_t i, hits = 0
-    with nogil:
-        for i in range(prim.shape[0]):
-            hits += prim[i] >= 0
-    return hits
-
-
 def _shade(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
            const float[:, ::1] faces, const float[:, ::1] emitters, const float[::1] sky,
            const int32_t[::1] pixel,
@@ -401,7 +390,10 @@ class LambertShader(Shader):
         if self._prepared is None or self._prepared[0] is not scene:
             self.prepare(scene)
         _, faces, emitters, light_pos, light_int = self._prepared
-        n_hit = _count_hits(hits.prim)                  # the rays that make new ones
+        # the rays that make new ones (each at most one bounce ray and one shadow ray
+        # per light, so the new batches are made no larger), the inputs checked
+        n_hit = checked_hits("lambert", rays.data, hits.t, hits.prim, paths.pixel, paths.sample,
+                             paths.slot, paths.throughput, len(faces), radiance)
         k_max = n_hit if depth < self.max_depth else 0  # the last depth makes no bounce
         next_rays = RayBatch._unfilled(k_max)    # _shade writes every row of its rays
         next_parent = np.empty(k_max, dtype=np.int32)
