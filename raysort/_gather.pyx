@@ -397,8 +397,13 @@ def add_unoccluded(double[:, ::1] radiance, const int32_t[::1] slot,
     c0, c1, c2 = &contribution[0, 0], &contribution[1, 0], &contribution[2, 0]
     with nogil:
         i = 0
-        while i + 16 <= n:
-            lit = rs_zero_bytes16(&occluded[i])
+        while i < n:
+            if i + 16 <= n:
+                lit = rs_zero_bytes16(&occluded[i])
+            else:                       # the last few rays
+                lit = 0
+                for j in range(i, n):
+                    lit |= (occluded[j] == 0) << (j - i)
             while lit:
                 j = i + rs_lowest(lit)
                 lit &= lit - 1
@@ -407,12 +412,6 @@ def add_unoccluded(double[:, ::1] radiance, const int32_t[::1] slot,
                 row[1] += c1[j * step]
                 row[2] += c2[j * step]
             i += 16
-        for j in range(i, n):
-            if occluded[j] == 0:
-                row = &radiance[0, 0] + 3 * slot[j]
-                row[0] += c0[j * step]
-                row[1] += c1[j * step]
-                row[2] += c2[j * step]
 
 
 def compiled_isa():
