@@ -1,8 +1,10 @@
 """The contract rules one element (or one run) at a time, for the check kernels
 (:mod:`raysort._contract`: the SDK's checks and the pipeline's pass over a
-traversal's lanes) and the sort-result checks inside the gather
+traversal's lanes), the sort-result checks inside the gather
 (:mod:`raysort._gather`: :func:`offsets_bad`, :func:`packet_bounds`,
-:func:`range_bad`), so every path applies the same rules.
+:func:`range_bad`) and the built-in shaders' check of their inputs
+(``_shading.pxd``'s ``checked_hits``: :func:`any_hit_bad`, :func:`slot_bad`), so every
+path applies the same rules.
 
 Each returns non-zero when the element breaks its contract, written without
 branches so that loops over a block vectorise.  A float ``x`` is finite exactly
@@ -29,6 +31,11 @@ cdef inline int closest_bad(int32_t p, float tmin, float t, float t0, float u, f
 cdef inline int any_hit_bad(int32_t p, uint32_t n_prim) noexcept nogil:
     """An any-hit lane: prim is -1 or below n_prim (t is the traversal's business)."""
     return <uint32_t> (p + 1) > n_prim
+
+
+cdef inline int slot_bad(int32_t s, uint32_t slots) noexcept nogil:
+    """A path's accumulator row: one of the ``slots`` rows of the radiance."""
+    return <uint32_t> s >= slots
 
 
 cdef inline Py_ssize_t large_packet(const int32_t *packets, Py_ssize_t n_big,

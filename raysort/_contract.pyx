@@ -16,7 +16,7 @@ from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t, uint64_t
 from libc.stdlib cimport calloc, free
 from libc.string cimport memcmp, memset
 from raysort._checks cimport (ray_bad, closest_bad, any_hit_bad, large_packet,
-                              packet_bounds, sub_packet_bad)
+                              packet_bounds, slot_bad, sub_packet_bad)
 from raysort._types cimport (RS_RAY_OX, RS_RAY_OY, RS_RAY_OZ, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ,
                              RS_RAY_TMIN, RS_RAY_TMAX, RS_RAY_ROWS, RS_PACKET_ROWS,
                              RS_PACKET_TMIN, RS_PACKET_T)
@@ -454,7 +454,7 @@ cdef inline int slots_bad(const int32_t *slot, Py_ssize_t a, Py_ssize_t b,
     cdef Py_ssize_t i
     cdef int bad = 0
     for i in range(a, b):
-        bad |= <uint32_t> slot[i] >= slots
+        bad |= slot_bad(slot[i], slots)
     return bad
 
 
@@ -487,7 +487,7 @@ cdef int paths_kernel(const float *const *r, const int32_t *parent, const float 
                         | nonfinite32(<const uint32_t *> w[1], i, i + 1) \
                         | nonfinite32(<const uint32_t *> w[2], i, i + 1):
                     return BAD_WEIGHT
-                if slot != NULL and <uint32_t> slot[i] >= slots:
+                if slot != NULL and slot_bad(slot[i], slots):
                     return BAD_SLOT
         a = b
     return 0

@@ -8,7 +8,7 @@ structure-of-arrays sub-packets, computing the inverse direction on the way
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.math cimport INFINITY
 from libc.string cimport memcpy
-from raysort._checks cimport offsets_bad, packet_bounds, range_bad
+from raysort._checks cimport offsets_bad, packet_bounds, range_bad, slot_bad
 from raysort._types cimport (rs_isa_name, RS_MAX_PACKET, RS_RAY_ROWS, RS_PACKET_ROWS,
                              RS_PACKET_T)
 
@@ -388,7 +388,7 @@ def add_unoccluded(double[:, ::1] radiance, const int32_t[::1] slot,
         return
     with nogil:
         for i in range(n):
-            bad |= <uint32_t> slot[i] >= <uint32_t> rows
+            bad |= slot_bad(slot[i], <uint32_t> rows)
     if bad:
         for i in range(n):
             if not 0 <= slot[i] < rows:

@@ -25,6 +25,7 @@ polynomial (``unit_circle``), so a shader compiled anywhere with contraction off
 from libc.math cimport sqrtf, fabsf
 from libc.stdint cimport int32_t, uint32_t, uint64_t
 from libc.string cimport memcpy
+from raysort._checks cimport any_hit_bad, slot_bad
 from raysort._rng cimport sample_key
 from raysort._types cimport RS_RAY_OX, RS_RAY_DX, RS_RAY_TMIN, RS_RAY_TMAX
 
@@ -72,13 +73,13 @@ cdef inline Py_ssize_t checked_hits(str shader, const float[:, ::1] rays, const 
     with nogil:
         for i in range(n):
             hits += prim[i] >= 0
-            bad |= (prim[i] >= n_faces) | (<size_t> slot[i] >= <size_t> rows)
+            bad |= any_hit_bad(prim[i], <uint32_t> n_faces) | slot_bad(slot[i], <uint32_t> rows)
     if bad:
         for i in range(n):
-            if prim[i] >= n_faces:
-                raise ValueError(f"{shader}: hits.prim[{i}] = {prim[i]} is not a face of the "
-                                 f"scene's {n_faces}")
-            if not 0 <= slot[i] < rows:
+            if any_hit_bad(prim[i], <uint32_t> n_faces):
+                raise ValueError(f"{shader}: hits.prim[{i}] = {prim[i]} is neither -1 nor a "
+                                 f"face of the scene's {n_faces}")
+            if slot_bad(slot[i], <uint32_t> rows):
                 raise ValueError(f"{shader}: paths.slot[{i}] = {slot[i]} is not a row of "
                                  f"radiance (0..{rows - 1})")
     return hits

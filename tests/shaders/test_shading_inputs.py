@@ -32,6 +32,8 @@ def hostile(case, scene, rays, hits):
         bad_hits.prim[n // 2] = len(scene.faces)
     elif case == "prim far beyond":
         bad_hits.prim[:] = 2_000_000_000
+    elif case == "prim below -1":
+        bad_hits.prim[1] = -5
     elif case == "slot beyond the radiance":
         paths.slot[-1] = n
     elif case == "negative slot":
@@ -46,6 +48,7 @@ def hostile(case, scene, rays, hits):
 
 
 CASES = {"prim beyond the faces": "hits.prim", "prim far beyond": "hits.prim",
+         "prim below -1": "hits.prim",
          "slot beyond the radiance": "paths.slot", "negative slot": "paths.slot",
          "short hits": "must hold", "short throughput": "must hold",
          "radiance of two channels": "radiance must be"}
