@@ -73,6 +73,25 @@ def test_point_light_on_plane_matches_closed_form():
     np.testing.assert_allclose(image[4, 4], expected, rtol=1e-3)
 
 
+def test_several_lights_add_up():
+    """Light is additive: a scene lit by three point lights renders as the sum of the
+    scene lit by each alone, less twice the scene without lights (its sky and emitters
+    counted once).  The paths and their bounces do not depend on the lights, so the
+    sums differ only by float64 rounding."""
+    def render(lights):
+        scene = raysort.load_scene("cornell")
+        scene.lights = lights
+        return raysort.Pipeline(scene).render(24, 24, spp=2, seed=5).image.astype(np.float64)
+
+    base = raysort.load_scene("cornell").lights
+    lights = base + [raysort.scene.PointLight((-0.4, 0.9, 0.2), (0.6, 0.8, 1.0)),
+                     raysort.scene.PointLight((0.3, 0.5, -0.1), (1.0, 0.3, 0.2))]
+    together = render(lights)
+    apart = sum(render([light]) for light in lights) - 2 * render([])
+    assert (apart > 0).mean() > 0.5
+    np.testing.assert_allclose(together, apart, rtol=1e-5, atol=1e-7)
+
+
 # --------------------------------------------------------------------------
 # determinism: the image cannot depend on sorter, traversal or threads
 # --------------------------------------------------------------------------

@@ -3,8 +3,9 @@ from libc.math cimport sqrtf, M_PI, INFINITY
 from libc.string cimport memcpy, memmove
 from libc.stdint cimport int32_t, uint32_t, uint64_t
 from raysort._rng cimport seed_key, uniform_at
-from raysort._types cimport (RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX, RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE,
-                             RS_MAX_DEPTH, rs_prefetch, rs_prefetchw)
+from raysort._types cimport (RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX, RS_RAY_TMIN, RS_RAY_TMAX,
+                             RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH, rs_prefetch,
+                             rs_prefetchw)
 from raysort.shaders._shading cimport (LANES, RS_SW, HitBlock, checked_hits, consecutive,
                                        take_rays, take_keys, rs_mask64, rs_list_valid,
                                        rs_record_columns, leave_surfaces, cosine_directions,
@@ -103,6 +104,96 @@ cdef inline void prefetch_new_rays(float *rays, Py_ssize_t ray_stride, float *we
         rs_prefetchw(<char *> weight + r * weight_stride)
     rs_prefetchw(parent)
 
+cdef inline int32_t toward_light(const HitBlock *b, int h, float lx, float ly, float lz,
+                                 float *w0, float *w1, float *w2, float *dist,
+                                 float *weight) noexcept nogil:
+    """Lane ``h``'s shadow ray toward the point light at (lx, ly, lz): its direction, its
+    length and its weight, BRDF (albedo / pi aside) * cosine / distance^2; 0 when the
+    light is behind the surface or at the hit point (no ray), else 1."""
+    cdef float v0 = lx - b.o[0][h]
+    cdef float v1 = ly - b.o[1][h]
+    cdef float v2 = lz - b.o[2][h]
+    cdef float dist2 = v0 * v0 + v1 * v1 + v2 * v2
+    cdef float cosl = v0 * b.nrm[0][h] + v1 * b.nrm[1][h] + v2 * b.nrm[2][h]
+    cdef float d = sqrtf(dist2)
+    cdef float inv_dist = <float>1.0 / d
+    w0[0] = v0 * inv_dist
+    w1[0] = v1 * inv_dist
+    w2[0] = v2 * inv_dist
+    dist[0] = d
+    weight[0] = cosl * inv_dist * <float>(1.0 / M_PI) / dist2
+    return (cosl > 0) & (dist2 > 0)
+
+
+cdef int light_lanes(HitBlock *b, float reflect[3][LANES], const int32_t *hit_slot,
+                     const float[:, ::1] light_pos, const float[:, ::1] light_int,
+                     float[:, ::1] sh_rays, int32_t[::1] sh_parent, int32_t[::1] sh_slot,
+                     float[:, ::1] sh_contrib, int m) noexcept nogil:
+    """The shadow rays of the block's lit lanes toward the scene's one light, a vector
+    at a time, as rays ``m, m + 1, ...``; returns the next free ray."""
+    cdef float weight[LANES]           # a shadow ray's BRDF * cosine / distance^2
+    cdef int32_t ok[LANES]             # 1 where the lane's shadow ray is made
+    cdef float lit[LANES]              # a shadow ray's contribution, lane by lane
+    cdef float lx = light_pos[0, 0], ly = light_pos[0, 1], lz = light_pos[0, 2], intensity
+    cdef float *row
+    cdef uint64_t keep
+    cdef int h, j, c, count = 0
+    for h in range(b.n):
+        ok[h] = toward_light(b, h, lx, ly, lz, &b.w[0][h], &b.w[1][h], &b.w[2][h],
+                             &b.tmax[h], &weight[h])
+    keep = rs_mask64(ok, b.n)
+    for h in range(b.n):
+        count += ok[h]
+    if count == 0:
+        return m
+    write_rays(b, keep, count, sh_rays, m, 1)
+    if count == b.n:        # every lane: copies
+        for c in range(3):
+            intensity = light_int[0, c]
+            row = &sh_contrib[c, m]
+            for j in range(count):
+                row[j] = reflect[c][j] * intensity * weight[j]
+        memcpy(&sh_parent[m], b.ray, count * sizeof(int32_t))
+        memcpy(&sh_slot[m], hit_slot, count * sizeof(int32_t))
+    else:                   # the lit lanes, a vector at a time
+        for c in range(3):
+            intensity = light_int[0, c]
+            for j in range(b.n):
+                lit[j] = reflect[c][j] * intensity * weight[j]
+            keep_lanes(lit, b.n, keep, &sh_contrib[c, m], count)
+        keep_lanes(b.ray, b.n, keep, &sh_parent[m], count)
+        keep_lanes(hit_slot, b.n, keep, &sh_slot[m], count)
+    return m + count
+
+
+cdef int light_hits(const HitBlock *b, float reflect[3][LANES], const int32_t *hit_slot,
+                    const float[:, ::1] light_pos, const float[:, ::1] light_int,
+                    float[:, ::1] sh_rays, int32_t[::1] sh_parent, int32_t[::1] sh_slot,
+                    float[:, ::1] sh_contrib, int m) noexcept nogil:
+    """The shadow rays of the block's hits toward each of several lights, hit by hit and
+    light by light (the lanes' operations of :func:`light_lanes`), as rays ``m, m + 1,
+    ...``; returns the next free ray."""
+    cdef float w0, w1, w2, dist, weight
+    cdef int h, c, L
+    for h in range(b.n):
+        for L in range(light_pos.shape[0]):
+            if not toward_light(b, h, light_pos[L, 0], light_pos[L, 1], light_pos[L, 2],
+                                &w0, &w1, &w2, &dist, &weight):
+                continue
+            for c in range(3):
+                sh_rays[RS_RAY_OX + c, m] = b.o[c][h]
+            sh_rays[RS_RAY_DX, m] = w0
+            sh_rays[RS_RAY_DX + 1, m] = w1
+            sh_rays[RS_RAY_DX + 2, m] = w2
+            sh_rays[RS_RAY_TMIN, m] = 0.0
+            sh_rays[RS_RAY_TMAX, m] = dist
+            for c in range(3):
+                sh_contrib[c, m] = reflect[c][h] * light_int[L, c] * weight
+            sh_parent[m] = b.ray[h]
+            sh_slot[m] = hit_slot[h]
+            m += 1
+    return m
+
 
 cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
                       const float[:, ::1] faces, const float[:, ::1] emitters,
@@ -114,18 +205,15 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                       float[:, ::1] next_rays, int32_t[::1] next_parent, float[:, ::1] next_thr,
                       float[:, ::1] sh_rays, int32_t[::1] sh_parent, int32_t[::1] sh_slot,
                       float[:, ::1] sh_contrib, int *n_next, int *n_shadow) noexcept nogil:
-    cdef int n = prim.shape[0], blk, i0, i, f, c, h, j, L, line, count, k = 0, m = 0, e
+    cdef int n = prim.shape[0], blk, i0, i, f, c, h, j, line, count, k = 0, m = 0, e
     cdef uint32_t dim = RS_DIM_BOUNCE + RS_DIMS_PER_BOUNCE * prm.depth   # types.h's budget
     cdef uint32_t seed_k = seed_key(prm.seed)
     cdef bint bounce = prm.depth < prm.max_depth
     cdef bint roulette = bounce and prm.russian_roulette and prm.depth >= prm.rr_depth
-    cdef float inv_pi = <float>(1.0 / M_PI)
-    cdef float w0, w1, w2, dist2, cosl, dist, inv_dist, q, best, lx, ly, lz, intensity
+    cdef float q, best
     cdef HitBlock b
     cdef float reflect[3][LANES]       # the path's weight after this bounce (thr * albedo)
-    cdef float weight[LANES]           # a shadow ray's BRDF * cosine / distance^2
     cdef uint32_t key[LANES]           # the path's random-number key
-    cdef int32_t ok[LANES]             # 1 where the lane's shadow ray is made
     cdef uint64_t keep                 # the lanes that make a ray (bit h: lane h)
     cdef int32_t face[LANES]           # the face each lane's ray hit
     cdef float albedo[3][LANES]        # and its albedo
@@ -134,9 +222,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
     cdef int32_t iota[LANES]           # 0, 1, 2, ...
     cdef int nb
     cdef bint special
-    cdef float lit[LANES]              # a shadow ray's contribution, lane by lane
     cdef int32_t hit_slot[LANES]       # the path's accumulator row
-    cdef float *row
     for c in range(3):
         columns[c] = b.nrm[c]
         columns[3 + c] = albedo[c]
@@ -220,50 +306,14 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
             for h in range(b.n):
                 reflect[c][h] = reflect[c][h] * albedo[c][h]
         leave_surfaces(&b)
-        # next-event estimation toward point lights: a shadow ray per lit hit
-        for L in range(light_pos.shape[0]):
-            lx = light_pos[L, 0]
-            ly = light_pos[L, 1]
-            lz = light_pos[L, 2]
-            for h in range(b.n):
-                w0 = lx - b.o[0][h]
-                w1 = ly - b.o[1][h]
-                w2 = lz - b.o[2][h]
-                dist2 = w0 * w0 + w1 * w1 + w2 * w2
-                cosl = w0 * b.nrm[0][h] + w1 * b.nrm[1][h] + w2 * b.nrm[2][h]
-                ok[h] = (cosl > 0) & (dist2 > 0)      # not behind the surface, not at the light
-                dist = sqrtf(dist2)
-                inv_dist = <float>1.0 / dist
-                b.w[0][h] = w0 * inv_dist
-                b.w[1][h] = w1 * inv_dist
-                b.w[2][h] = w2 * inv_dist
-                b.tmax[h] = dist
-                # BRDF (albedo / pi) * cos(light, normal) / distance^2
-                weight[h] = cosl * inv_dist * inv_pi / dist2
-            keep = rs_mask64(ok, b.n)
-            count = 0
-            for h in range(b.n):
-                count += ok[h]
-            if count == 0:
-                continue
-            write_rays(&b, keep, count, sh_rays, m, 1)
-            if count == b.n:        # every lane: copies
-                for c in range(3):
-                    intensity = light_int[L, c]
-                    row = &sh_contrib[c, m]
-                    for j in range(count):
-                        row[j] = reflect[c][j] * intensity * weight[j]
-                memcpy(&sh_parent[m], b.ray, count * sizeof(int32_t))
-                memcpy(&sh_slot[m], hit_slot, count * sizeof(int32_t))
-            else:                   # the lit lanes, a vector at a time
-                for c in range(3):
-                    intensity = light_int[L, c]
-                    for j in range(b.n):
-                        lit[j] = reflect[c][j] * intensity * weight[j]
-                    keep_lanes(lit, b.n, keep, &sh_contrib[c, m], count)
-                keep_lanes(b.ray, b.n, keep, &sh_parent[m], count)
-                keep_lanes(hit_slot, b.n, keep, &sh_slot[m], count)
-            m += count
+        # next-event estimation toward point lights: a shadow ray per lit hit and light,
+        # in the order of the hits (the shadow rays' parents ascend)
+        if light_pos.shape[0] == 1:
+            m = light_lanes(&b, reflect, hit_slot, light_pos, light_int, sh_rays, sh_parent,
+                            sh_slot, sh_contrib, m)
+        elif light_pos.shape[0] > 1:
+            m = light_hits(&b, reflect, hit_slot, light_pos, light_int, sh_rays, sh_parent,
+                           sh_slot, sh_contrib, m)
         if not bounce:
             continue
         # a cosine-weighted bounce per hit (per survivor of Russian roulette, off by default)

@@ -12,6 +12,7 @@ import pytest
 
 import raysort
 from raysort.rays import MAX_PACKET
+from raysort.scene import PointLight
 from raysort.reference import brute_force
 from raysort.shaders import lambert
 from raysort.workloads import workload
@@ -157,16 +158,19 @@ def test_the_next_throughput_is_contiguous():
     assert bounce.throughput.flags.c_contiguous
 
 
-@pytest.mark.parametrize("name", ["cornell", "forest"])
-def test_shade_continues_every_hit_as_numpy_computes_it(each_isa, name):
+@pytest.mark.parametrize("name, more_lights", [("cornell", 0), ("cornell", 2), ("forest", 0)])
+def test_shade_continues_every_hit_as_numpy_computes_it(each_isa, name, more_lights):
     """One ``shade`` call on every ISA, held against NumPy statements of the same
     float32 operations (lambert.pyx, _shading.pxd), on brute-force hits of which a random
     third in the batch's second half are turned into misses, so that runs of hits
     (copied row by row) and runs with gaps (ray by ray) both occur.  Each hit continues
     in order, from its hit point pushed off the facing normal, with the throughput times
-    the face's albedo; each miss adds the sky; the cornell box's light adds a shadow ray
-    from the same point for each hit it lights, with its weight."""
+    the face's albedo; each miss adds the sky; each light adds a shadow ray from the same
+    point for each hit it lights, with its weight: hit by hit, and for one hit light by
+    light (``more_lights`` added to the cornell box's one), so the parents ascend."""
     scene = raysort.load_scene(name)
+    scene.lights += [PointLight((0.2 * i - 0.3, 0.8, 0.1 * i), (0.5 * i, 1.0, 0.7))
+                     for i in range(more_lights)]
     rays = workload(scene, "primary", width=48, height=48, seed=4).rays
     n = len(rays)
     hits = raysort.Hits(n)
@@ -208,26 +212,27 @@ def test_shade_continues_every_hit_as_numpy_computes_it(each_isa, name):
     sky = np.asarray(scene.sky, np.float32)[:, None]
     added = np.where(hits.prim >= 0, thr * emitted, thr * sky).astype(np.float64)
     np.testing.assert_array_equal(radiance, added.T)
-    if scene.lights:                # one point light: a shadow ray per lit hit
-        (light,) = scene.lights
-        pos = np.asarray(light.position, np.float32)[:, None]
-        w = pos - start
+    if scene.lights:                # per hit (rows), per light (columns)
+        pos = np.asarray([light.position for light in scene.lights], np.float32).T
+        w = pos[:, None, :] - start[:, :, None]
         dist2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
-        cosl = w[0] * nrm[0] + w[1] * nrm[1] + w[2] * nrm[2]
+        cosl = w[0] * nrm[0][:, None] + w[1] * nrm[1][:, None] + w[2] * nrm[2][:, None]
         lit = (cosl > 0) & (dist2 > 0)
-        assert 0 < lit.sum() < len(lit)
+        assert 0 < lit.sum() < lit.size
         dist = np.sqrt(dist2)
         inv = np.float32(1) / dist
         weight = cosl * inv * np.float32(1 / np.pi) / dist2
+        intensity = np.asarray([light.intensity for light in scene.lights], np.float32).T
+        contribution = (thr[:, hit] * albedo)[:, :, None] * intensity[:, None, :] * weight
         shadow = bounce.shadow
-        np.testing.assert_array_equal(shadow.parent, hit[lit])
-        np.testing.assert_array_equal(shadow.slot, hit[lit])      # slot i is path i's
-        np.testing.assert_array_equal(shadow.rays.origins, start[:, lit])
+        each = np.broadcast_to(hit[:, None], lit.shape)
+        np.testing.assert_array_equal(shadow.parent, each[lit])
+        np.testing.assert_array_equal(shadow.slot, each[lit])      # slot i is path i's
+        np.testing.assert_array_equal(shadow.rays.origins,
+                                      np.broadcast_to(start[:, :, None], w.shape)[:, lit])
         np.testing.assert_array_equal(shadow.rays.directions, (w * inv)[:, lit])
         np.testing.assert_array_equal(shadow.rays.tmin, 0)
         np.testing.assert_array_equal(shadow.rays.tmax, dist[lit])
-        intensity = np.asarray(light.intensity, np.float32)[:, None]
-        np.testing.assert_array_equal(shadow.contribution,
-                                      (thr[:, hit] * albedo * intensity * weight)[:, lit])
+        np.testing.assert_array_equal(shadow.contribution, contribution[:, lit])
     else:
         assert bounce.shadow is None
