@@ -3,7 +3,8 @@
 traversal's lanes), the sort-result checks inside the gather
 (:mod:`raysort._gather`: :func:`offsets_bad`, :func:`packet_bounds`,
 :func:`range_bad`) and the built-in shaders' check of their inputs
-(``_shading.pxd``'s ``checked_hits``: :func:`any_hit_bad`, :func:`slot_bad`), so every
+(``_shading.pxd``'s ``checked_hits``: :func:`any_hit_bad`, :func:`slot_bad`) and of the
+paths they make (``lambert``: :func:`parents_weights_bad`, :func:`slots_bad`), so every
 path applies the same rules.
 
 Each returns non-zero when the element breaks its contract, written without
@@ -111,4 +112,41 @@ cdef inline int offsets_bad(const int32_t *offsets, Py_ssize_t n_sub, int32_t n,
     for k in range(n_sub):
         size = <long long> offsets[k + 1] - offsets[k]
         bad |= (size <= 0) | (size > max_packet)
+    return bad
+
+
+cdef inline int nonfinite32(const uint32_t *x, Py_ssize_t a, Py_ssize_t b) noexcept nogil:
+    """Any of the float32 values x[a:b] (as bits) infinite or NaN: all exponent bits set."""
+    cdef Py_ssize_t i
+    cdef int bad = 0
+    for i in range(a, b):
+        bad |= (x[i] & 0x7F800000u) == 0x7F800000u
+    return bad
+
+
+cdef inline int parents_weights_bad(const int32_t *parent, const uint32_t *w0,
+                                   const uint32_t *w1, const uint32_t *w2, Py_ssize_t a,
+                                   Py_ssize_t b, uint32_t n) noexcept nogil:
+    """parent[a:b] in [0, n) and ascending (from parent[a - 1] when a > 0), and the
+    float32 weights (as bits) w0, w1, w2 [a:b] finite, in one loop."""
+    cdef Py_ssize_t i
+    cdef int bad = 0
+    if a == 0 and b > 0:
+        bad = (<uint32_t> parent[0] >= n) | nonfinite32(w0, 0, 1) | nonfinite32(w1, 0, 1) \
+            | nonfinite32(w2, 0, 1)
+        a = 1
+    for i in range(a, b):
+        bad |= ((<uint32_t> parent[i] >= n) | (parent[i] < parent[i - 1])
+                | ((w0[i] & 0x7F800000u) == 0x7F800000u) | ((w1[i] & 0x7F800000u) == 0x7F800000u)
+                | ((w2[i] & 0x7F800000u) == 0x7F800000u))
+    return bad
+
+
+cdef inline int slots_bad(const int32_t *slot, Py_ssize_t a, Py_ssize_t b,
+                          uint32_t slots) noexcept nogil:
+    """:func:`slot_bad` for any of slot[a:b]."""
+    cdef Py_ssize_t i
+    cdef int bad = 0
+    for i in range(a, b):
+        bad |= slot_bad(slot[i], slots)
     return bad

@@ -16,7 +16,8 @@ from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t, uint64_t
 from libc.stdlib cimport calloc, free
 from libc.string cimport memcmp, memset
 from raysort._checks cimport (ray_bad, closest_bad, any_hit_bad, large_packet,
-                              packet_bounds, slot_bad, sub_packet_bad)
+                              packet_bounds, slot_bad, sub_packet_bad, nonfinite32,
+                              parents_weights_bad, slots_bad)
 from raysort._types cimport (RS_RAY_OX, RS_RAY_OY, RS_RAY_OZ, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ,
                              RS_RAY_TMIN, RS_RAY_TMAX, RS_RAY_ROWS, RS_PACKET_ROWS,
                              RS_PACKET_TMIN, RS_PACKET_T)
@@ -87,12 +88,12 @@ cdef int is_identity(const int32_t *order, int32_t n) noexcept nogil:
 
 cdef int sort_kernel(const int32_t *order, const int32_t *offsets, Py_ssize_t n_sub,
                      const int32_t *packets, Py_ssize_t n_big, int32_t n, int64_t max_packet,
-                     uint8_t *seen, Py_ssize_t *where) noexcept nogil:
+                     bint known_identity, uint8_t *seen, Py_ssize_t *where) noexcept nogil:
     cdef Py_ssize_t k, k_big = 0
     cdef int64_t a, b
     cdef int32_t lo, hi
     # the identity is a permutation: a sub-packet need only end in its first ray's packet
-    cdef int identity = is_identity(order, n)
+    cdef int identity = known_identity or is_identity(order, n)
     if offsets[0] != 0:
         return BAD_OFFSETS_START
     if offsets[n_sub] != n:
@@ -133,6 +134,8 @@ cdef int sort_fault(const int32_t *order, int64_t a, int64_t b, const int32_t *p
                 return BAD_INDEX_RANGE
             where[0] = k
             return BAD_MIXED
+    if seen == NULL:            # (the identity: not reached, its rays are all in range)
+        return BAD_MIXED
     memset(seen, 0, n)
     for i in range(b):
         if seen[order[i]]:
@@ -143,20 +146,24 @@ cdef int sort_fault(const int32_t *order, int64_t a, int64_t b, const int32_t *p
 
 
 def sort_result(const int32_t[::1] order, const int32_t[::1] offsets,
-                const int32_t[::1] packets, int32_t n, int64_t max_packet):
+                const int32_t[::1] packets, int32_t n, int64_t max_packet,
+                bint identity=False):
     """A sorter's ``order``/``offsets`` (contiguous int32) for ``n`` rays in the (valid)
     large packets ``packets``: a permutation of ``range(n)`` cut into sub-packets of
     1..max_packet rays, each inside one large packet.  The caller checks
-    ``len(order) == n`` and ``len(offsets) >= 1``."""
+    ``len(order) == n`` and ``len(offsets) >= 1``; ``identity`` True says the order is
+    known to be ``0, 1, ..., n - 1`` (:func:`raysort.orders.is_identity_order`), so it
+    is not read, and only the offsets are checked."""
     cdef Py_ssize_t where = 0
     cdef int code
-    cdef uint8_t *seen = <uint8_t *> calloc(n + 1, 1)
-    if seen == NULL:
+    cdef uint8_t *seen = NULL if identity else <uint8_t *> calloc(n + 1, 1)
+    if seen == NULL and not identity:
         raise MemoryError()
     try:
         with nogil:
             code = sort_kernel(&order[0] if n else NULL, &offsets[0], offsets.shape[0] - 1,
-                               &packets[0], packets.shape[0] - 1, n, max_packet, seen, &where)
+                               &packets[0], packets.shape[0] - 1, n, max_packet, identity, seen,
+                               &where)
     finally:
         free(seen)
     return code, where
@@ -368,15 +375,6 @@ def index_array(x, int64_t lo, int64_t hi, bint ascending):
     return code, where
 
 
-cdef inline int nonfinite32(const uint32_t *x, Py_ssize_t a, Py_ssize_t b) noexcept nogil:
-    """Any of the float32 values x[a:b] (as bits) infinite or NaN: all exponent bits set."""
-    cdef Py_ssize_t i
-    cdef int bad = 0
-    for i in range(a, b):
-        bad |= (x[i] & 0x7F800000u) == 0x7F800000u
-    return bad
-
-
 cdef inline int nonfinite64(const uint64_t *x, Py_ssize_t a, Py_ssize_t b) noexcept nogil:
     """:func:`nonfinite32` for float64 bits."""
     cdef Py_ssize_t i
@@ -429,33 +427,6 @@ cdef inline int row_ray_bad(const float *const *r, Py_ssize_t i) noexcept nogil:
     """:func:`ray_bad` of ray ``i``, ``r`` pointing at the ``RS_RAY_*`` rows."""
     return ray_bad(r[RS_RAY_OX][i], r[RS_RAY_OY][i], r[RS_RAY_OZ][i], r[RS_RAY_DX][i],
                    r[RS_RAY_DY][i], r[RS_RAY_DZ][i], r[RS_RAY_TMIN][i], r[RS_RAY_TMAX][i])
-
-
-cdef inline int parents_weights_bad(const int32_t *parent, const uint32_t *w0,
-                                   const uint32_t *w1, const uint32_t *w2, Py_ssize_t a,
-                                   Py_ssize_t b, uint32_t n) noexcept nogil:
-    """parent[a:b] in [0, n) and ascending (from parent[a - 1] when a > 0), and the
-    float32 weights (as bits) w0, w1, w2 [a:b] finite, in one loop."""
-    cdef Py_ssize_t i
-    cdef int bad = 0
-    if a == 0 and b > 0:
-        bad = (<uint32_t> parent[0] >= n) | nonfinite32(w0, 0, 1) | nonfinite32(w1, 0, 1) \
-            | nonfinite32(w2, 0, 1)
-        a = 1
-    for i in range(a, b):
-        bad |= ((<uint32_t> parent[i] >= n) | (parent[i] < parent[i - 1])
-                | ((w0[i] & 0x7F800000u) == 0x7F800000u) | ((w1[i] & 0x7F800000u) == 0x7F800000u)
-                | ((w2[i] & 0x7F800000u) == 0x7F800000u))
-    return bad
-
-
-cdef inline int slots_bad(const int32_t *slot, Py_ssize_t a, Py_ssize_t b,
-                          uint32_t slots) noexcept nogil:
-    cdef Py_ssize_t i
-    cdef int bad = 0
-    for i in range(a, b):
-        bad |= slot_bad(slot[i], slots)
-    return bad
 
 
 cdef int paths_kernel(const float *const *r, const int32_t *parent, const float *const *w,
@@ -528,9 +499,10 @@ def paths(const float[:, ::1] data, Py_ssize_t m, const int32_t[::1] parent,
 # ---------------------------------------------------------------------------
 
 cdef bint paths_ok(object rays, object parent, object slot, object weight, int64_t n,
-                   int64_t slots, bint with_rays, type batch_type):
+                   int64_t slots, bint with_rays, bint with_values, type batch_type):
     """:func:`paths` of a RayBatch and arrays already of the pipeline's types (int32,
-    float32 (3, m) with contiguous rows), all valid; False for anything else."""
+    float32 (3, m) with contiguous rows), all valid (without ``with_values``: of those
+    types and shapes, their values checked by their maker); False for anything else."""
     cdef const float[:, ::1] data
     cdef const int32_t[::1] p
     cdef const int32_t[::1] s
@@ -552,7 +524,7 @@ cdef bint paths_ok(object rays, object parent, object slot, object weight, int64
             or w.shape[0] != 3 or w.shape[1] != m or (m and w.strides[1] != sizeof(float))
             or (slot is not None and s.shape[0] != m)):
         return False
-    if m == 0:
+    if m == 0 or not with_values:
         return True
     for c in range(RS_RAY_ROWS):
         r[c] = &data[c, 0]
@@ -566,11 +538,14 @@ cdef bint paths_ok(object rays, object parent, object slot, object weight, int64
 
 
 def bounce_ok(bounce, int64_t n, int64_t slots, const double[:, ::1] radiance not None,
-              bint with_rays, type bounce_type, type shadow_type, type batch_type):
+              bint with_rays, type bounce_type, type shadow_type, type batch_type,
+              bint with_paths=True):
     """True when a shader's ``bounce`` is exactly of the pipeline's types (``bounce_type``,
     ``shadow_type``, ``batch_type``, int32 and float32 arrays) and keeps its contract
-    (see :func:`raysort.contract.check_bounce`), and ``radiance`` is finite: the common
-    case, checked without running Python.  False means: let ``check_bounce`` say."""
+    (see :func:`raysort.contract.check_bounce`; without ``with_paths``, the values of
+    the parents, weights and slots are left to the shader, which checked them as it
+    wrote them), and ``radiance`` is finite: the common case, checked without running
+    Python.  False means: let ``check_bounce`` say."""
     cdef Py_ssize_t where = 0
     cdef int code
     if type(bounce) is not bounce_type:
@@ -579,9 +554,9 @@ def bounce_ok(bounce, int64_t n, int64_t slots, const double[:, ::1] radiance no
         code = finite_kernel(&radiance[0, 0], radiance.shape[0] * radiance.shape[1], &where) \
             if radiance.shape[0] * radiance.shape[1] else 0
     if code or not paths_ok(bounce.rays, bounce.parent, None, bounce.throughput, n, slots,
-                            with_rays, batch_type):
+                            with_rays, with_paths, batch_type):
         return False
     shadow = bounce.shadow
     return shadow is None or (type(shadow) is shadow_type and paths_ok(
         shadow.rays, shadow.parent, shadow.slot, shadow.contribution, n, slots, with_rays,
-        batch_type))
+        with_paths, batch_type))

@@ -25,6 +25,7 @@ import numpy as np
 
 from raysort import _contract, isa
 from raysort.errors import ConfigError, PluginContractError, PluginError
+from raysort.orders import is_identity_order
 from raysort.paths import Bounce, ShadowRays
 from raysort.rays import (MAX_PACKET, MAX_RAYS, PACKET_ROWS, RAY_ROWS, PacketRow, RayBatch,
                           RayRow)
@@ -251,7 +252,8 @@ def check_sort(plugin, result, n, packets):
     fail = _failer("sorters", plugin)
     order, offsets = sort_arrays(plugin, result, n)
     packets = np.ascontiguousarray(packets, dtype=np.int32)
-    code, where = _kernels().sort_result(order, offsets, packets, n, MAX_PACKET)
+    code, where = _kernels().sort_result(order, offsets, packets, n, MAX_PACKET,
+                                         is_identity_order(order))
     if code in (_BAD.BAD_OFFSETS_START, _BAD.BAD_OFFSETS_END, _BAD.BAD_OFFSETS_RANGE):
         fail(f"offsets must run from 0 to {n}, got {offsets[0]}..{offsets[-1]}"
              + (f" with {offsets[where + 1]} at position {where + 1}"
@@ -404,19 +406,22 @@ def check_rays(kind, plugin, rays, label):
     _rays(rays, label, _failer(kind, plugin))
 
 
-def check_bounce(plugin, bounce, n, slots, radiance, *, with_rays=True):
+def check_bounce(plugin, bounce, n, slots, radiance, *, with_rays=True, with_paths=True):
     """A shader's :class:`Bounce` for ``n`` shaded rays whose paths add to
     ``radiance`` rows ``0..slots-1``; returns it with arrays of the pipeline's types.
 
     ``parent`` must ascend, each in ``0..n-1``; rays are finite or marked
     invalid; throughput and contributions are finite float (3, m) arrays; shadow
     rays' ``slot`` lie in ``0..slots-1``; ``radiance`` is still finite.  Each part
-    is checked in one pass.
+    is checked in one pass.  (The pipeline leaves the rays to its gather,
+    ``with_rays=False``, and, ``with_paths=False``, the values of the parents,
+    weights and slots to a raysort shader that checks them by these rules as it
+    writes them: ``lambert``; their types and shapes are checked here.)
     """
     if (type(radiance) is np.ndarray and radiance.ndim == 2 and radiance.dtype == np.float64
             and radiance.flags.c_contiguous
             and _kernels().bounce_ok(bounce, n, slots, radiance, with_rays, Bounce, ShadowRays,
-                                     RayBatch)):
+                                     RayBatch, with_paths)):
         return bounce           # the pipeline's own types, valid: checked in one C call
     fail = _failer("shaders", plugin)
     _finite(radiance, "radiance", fail)

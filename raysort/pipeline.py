@@ -39,6 +39,7 @@ from raysort._gather import follow_paths as _follow_paths
 from raysort._gather import sample_paths as _sample_paths
 from raysort.bvh import BVH
 from raysort.errors import ConfigError
+from raysort.orders import is_identity_order
 from raysort.params import boolean, integer
 from raysort.paths import Paths
 from raysort.progress import with_rays
@@ -439,8 +440,8 @@ class Pipeline:
         (unless trusted); the traversal checks each hit as it writes it.  Returns
         ``(hits, counters, bad_ray)``, or None for hits if the order is not valid."""
         n = len(rays)
-        if check_sort and isa.module("_contract").sort_result(order, offsets, packets, n,
-                                                              MAX_PACKET)[0]:
+        if check_sort and isa.module("_contract").sort_result(
+                order, offsets, packets, n, MAX_PACKET, is_identity_order(order))[0]:
             return None, None, -1
         out = np.empty(n, np.uint8) if any_hit else np.empty((4, n), np.float32)
         clock.lap("check")
@@ -632,9 +633,10 @@ class Pipeline:
                 bounce = contract.call_plugin("shaders", self.shader, "shade", self.scene, rays,
                                               hits, paths, depth, seed, radiance)
                 clock.lap("shade")
-                if self._checked(self.shader):
+                if self._checked(self.shader):     # the rays: the gather checks them
                     bounce = contract.check_bounce(self.shader, bounce, len(rays), n_pix,
-                                                   radiance, with_rays=False)  # the gather
+                                                   radiance, with_rays=False,
+                                                   with_paths=not _checks_its_paths(self.shader))
                     clock.lap("check")
                 if bounce.shadow is not None and len(bounce.shadow.rays):
                     self._trace_shadows(bounce.shadow, packets, radiance, stats, tap, tile,
@@ -714,6 +716,13 @@ def _trusted(cls):
     """Only raysort's own plugins that declare ``trusted = True`` themselves may skip
     the contract checks; a subclass from elsewhere never inherits that trust."""
     return vars(cls).get("trusted") is True and cls.__module__.split(".")[0] == "raysort"
+
+
+def _checks_its_paths(shader):
+    """Whether ``shader`` is one of raysort's own that checks the parents, weights and
+    slots of the paths it makes as it writes them (``lambert``), by the rules of
+    :func:`raysort.contract.check_bounce`, which need then not read them again."""
+    return _trusted(type(shader)) and vars(type(shader)).get("_checks_its_paths") is True
 
 
 def _check_image_size(width, height):

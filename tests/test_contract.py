@@ -308,6 +308,10 @@ def _one_sub_packet(self, rays, packets, bounds):
     return np.arange(len(rays), dtype=np.int32), np.array([0, len(rays)], np.int32)
 
 
+def _identity_one_sub_packet(self, rays, packets, bounds):
+    return raysort.sdk.identity_order(len(rays)), np.array([0, len(rays)], np.int32)
+
+
 def _repeat_first_ray(self, rays, packets, bounds):
     order = np.arange(len(rays), dtype=np.int32)
     order[1:2] = 0
@@ -347,6 +351,7 @@ def _break_first_hit(value):
     ("none", _repeat_first_ray, "permutation"),
     ("nah", _repeat_first_ray, "permutation"),
     ("none", _one_sub_packet, "mixes rays of different large packets"),
+    ("none", _identity_one_sub_packet, "mixes rays of different large packets"),
 ])
 def test_stream_reading_the_batch_checks_the_sorter(monkeypatch, sorter, broken, match):
     """Without packets (``stream`` reads the batch in the sorter's order) a built-in

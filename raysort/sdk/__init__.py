@@ -12,7 +12,9 @@ built against :func:`get_include`)::
   :class:`Bounce`, :class:`ShadowRays`, :class:`Counters`), and
   :class:`LibraryTraversal`, the base of a traversal answered by an outside ray
   tracer (subclasses give its scene and query; see raysort-embree);
-* **packet helpers** (:func:`fixed_packets`), the row indices of ray batches
+* **packet helpers** (:func:`fixed_packets`; :func:`identity_order`, the order
+  of a sorter that keeps the rays' order, which the contract check knows without
+  reading it), the row indices of ray batches
   and gathered packets (:class:`RayRow`, :class:`PacketRow`; prefer the named
   views such as ``packets.t``) and layout limits (:data:`MAX_PACKET`), all
   derived from ``raysort/include/raysort/types.h``;
@@ -27,6 +29,7 @@ built against :func:`get_include`)::
 from raysort.contract import (before_traversal, check_bounce, check_counters, check_generated,
                               check_hits, check_packets, check_sort)
 from raysort.errors import ConfigError, PluginContractError
+from raysort.orders import identity_order
 from raysort.params import boolean, integer, number, vector3
 from raysort.paths import Bounce, Paths, ShadowRays
 from raysort.plugin import Generator, Shader, Sorter, Traversal
@@ -46,7 +49,7 @@ def get_include():
 __all__ = [
     "Generator", "Sorter", "Traversal", "Shader", "LibraryTraversal",
     "RayBatch", "Packets", "Hits", "Paths", "Bounce", "ShadowRays", "Counters",
-    "MAX_PACKET", "RayRow", "PacketRow", "fixed_packets",
+    "MAX_PACKET", "RayRow", "PacketRow", "fixed_packets", "identity_order",
     "integer", "number", "boolean", "vector3",
     "check_sort", "check_hits", "before_traversal", "check_counters", "check_generated",
     "check_bounce", "check_packets", "ConfigError", "PluginContractError", "get_include",

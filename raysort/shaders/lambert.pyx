@@ -2,6 +2,7 @@
 from libc.math cimport sqrtf, M_PI, INFINITY
 from libc.string cimport memcpy, memmove
 from libc.stdint cimport int32_t, uint32_t, uint64_t
+from raysort._checks cimport parents_weights_bad, slots_bad
 from raysort._rng cimport seed_key, uniform_at
 from raysort._types cimport (RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX, RS_RAY_TMIN, RS_RAY_TMAX,
                              RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH, rs_prefetch,
@@ -14,6 +15,7 @@ from raysort.shaders._shading cimport (LANES, RS_SW, HitBlock, checked_hits, con
 import numpy as np
 
 from raysort import isa
+from raysort.contract import check_bounce
 from raysort.params import boolean, integer
 from raysort.paths import Bounce, ShadowRays
 from raysort.plugin import Shader
@@ -204,8 +206,11 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                       double[:, ::1] radiance,
                       float[:, ::1] next_rays, int32_t[::1] next_parent, float[:, ::1] next_thr,
                       float[:, ::1] sh_rays, int32_t[::1] sh_parent, int32_t[::1] sh_slot,
-                      float[:, ::1] sh_contrib, int *n_next, int *n_shadow) noexcept nogil:
-    cdef int n = prim.shape[0], blk, i0, i, f, c, h, j, line, count, k = 0, m = 0, e
+                      float[:, ::1] sh_contrib, int *n_next, int *n_shadow,
+                      int *paths_bad) noexcept nogil:
+    cdef int n = prim.shape[0], blk, i0, i, f, c, h, j, line, count, k = 0, m = 0, e, m0
+    cdef int bad = 0                   # a new path breaks the Bounce contract (see below)
+    cdef uint32_t slots = <uint32_t> radiance.shape[0]
     cdef uint32_t dim = RS_DIM_BOUNCE + RS_DIMS_PER_BOUNCE * prm.depth   # types.h's budget
     cdef uint32_t seed_k = seed_key(prm.seed)
     cdef bint bounce = prm.depth < prm.max_depth
@@ -308,12 +313,20 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
         leave_surfaces(&b)
         # next-event estimation toward point lights: a shadow ray per lit hit and light,
         # in the order of the hits (the shadow rays' parents ascend)
+        m0 = m
         if light_pos.shape[0] == 1:
             m = light_lanes(&b, reflect, hit_slot, light_pos, light_int, sh_rays, sh_parent,
                             sh_slot, sh_contrib, m)
         elif light_pos.shape[0] > 1:
             m = light_hits(&b, reflect, hit_slot, light_pos, light_int, sh_rays, sh_parent,
                            sh_slot, sh_contrib, m)
+        # the Bounce contract's rules (_checks.pxd) on the paths just written, while they
+        # are in L1: the pipeline then need not read them again (check_bounce)
+        if m > m0:
+            bad |= parents_weights_bad(&sh_parent[0], <const uint32_t *> &sh_contrib[0, 0],
+                                       <const uint32_t *> &sh_contrib[1, 0],
+                                       <const uint32_t *> &sh_contrib[2, 0], m0, m, n) \
+                | slots_bad(&sh_slot[0], m0, m, slots)
         if not bounce:
             continue
         # a cosine-weighted bounce per hit (per survivor of Russian roulette, off by default)
@@ -349,9 +362,13 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
             for c in range(3):
                 keep_lanes(reflect[c], b.n, keep, &next_thr[c, k], count)
             keep_lanes(b.ray, b.n, keep, &next_parent[k], count)
+        bad |= parents_weights_bad(&next_parent[0], <const uint32_t *> &next_thr[0, 0],
+                                   <const uint32_t *> &next_thr[1, 0],
+                                   <const uint32_t *> &next_thr[2, 0], k, k + count, n)
         k += count
     n_next[0] = k
     n_shadow[0] = m
+    paths_bad[0] = bad
 
 
 def _pack_rows(float[::1] flat, Py_ssize_t rows, Py_ssize_t n):
@@ -377,14 +394,16 @@ def _shade(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim
            double[:, ::1] radiance, float[:, ::1] next_rays, int32_t[::1] next_parent,
            float[:, ::1] next_thr, float[:, ::1] sh_rays, int32_t[::1] sh_parent,
            int32_t[::1] sh_slot, float[:, ::1] sh_contrib):
-    """Typed entry point: shade a batch without the GIL; returns (next rays, shadow rays)."""
+    """Typed entry point: shade a batch without the GIL; returns (next rays, shadow rays,
+    whether a new path breaks the Bounce contract: a parent out of order or range, a
+    weight not finite, a slot out of range)."""
     cdef ShadeParams prm = ShadeParams(depth, max_depth, seed, russian_roulette, rr_depth)
-    cdef int k = 0, m = 0
+    cdef int k = 0, m = 0, bad = 0
     with nogil:
         shade_batch(rays, t, prim, faces, emitters, sky, pixel, sample, slot, thr,
                     prm, light_pos, light_int, radiance, next_rays, next_parent, next_thr,
-                    sh_rays, sh_parent, sh_slot, sh_contrib, &k, &m)
-    return k, m
+                    sh_rays, sh_parent, sh_slot, sh_contrib, &k, &m, &bad)
+    return k, m, bool(bad)
 
 
 class LambertShader(Shader):
@@ -411,6 +430,9 @@ class LambertShader(Shader):
     """
 
     trusted = True
+    # the kernel checks the parents, weights and slots of the paths it makes by the
+    # Bounce contract's rules as it writes them (the pipeline's check_bounce need not)
+    _checks_its_paths = True
 
     def __init__(self, *, max_depth=2, shadow_rays=None, russian_roulette=False, rr_depth=1):
         self.max_depth = integer("max_depth", max_depth, 0, RS_MAX_DEPTH)
@@ -453,7 +475,7 @@ class LambertShader(Shader):
         sh_parent = np.empty(m_max, dtype=np.int32)
         sh_slot = np.empty(m_max, dtype=np.int32)
         sh_contrib = np.empty((3, m_max), dtype=np.float32)
-        k, m = isa.module("shaders.lambert")._shade(
+        k, m, paths_bad = isa.module("shaders.lambert")._shade(
             rays.data, hits.t, hits.prim, faces, emitters, scene.sky, paths.pixel, paths.sample,
             paths.slot, paths.throughput, depth, self.max_depth, seed & 0xFFFFFFFF,
             self.russian_roulette, self.rr_depth, light_pos, light_int, radiance,
@@ -463,5 +485,9 @@ class LambertShader(Shader):
         if m:
             shadow = ShadowRays(sh_rays.truncate(m), sh_parent[:m], sh_slot[:m],
                                 sh_contrib[:, :m])
-        return Bounce(next_rays.truncate(k), next_parent[:k], _pack_rows(next_thr, 3, k),
-                      shadow)
+        bounce = Bounce(next_rays.truncate(k), next_parent[:k], _pack_rows(next_thr, 3, k),
+                        shadow)
+        if paths_bad:       # the contract's check says what is wrong, naming the shader
+            check_bounce(self, bounce, len(rays), len(radiance), radiance)
+            raise AssertionError("lambert's own check found a path that check_bounce passes")
+        return bounce

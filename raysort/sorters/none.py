@@ -1,9 +1,7 @@
 """``none``: fixed-size packets in input order (no sorting)."""
 from __future__ import annotations
 
-import numpy as np
-
-from raysort.sdk import MAX_PACKET, Sorter, fixed_packets, integer
+from raysort.sdk import MAX_PACKET, Sorter, fixed_packets, identity_order, integer
 
 __all__ = ["NoneSorter"]
 
@@ -29,20 +27,6 @@ class NoneSorter(Sorter):
         self.packet_size = integer("packet_size", packet_size, 1, MAX_PACKET)
 
     def sort(self, rays, packets, bounds):
-        """``order`` is a read-only view of one ``arange`` that grows to the largest batch
-        (writing a new one per batch cost the frame a pass over memory)."""
-        return _identity(len(rays)), fixed_packets(packets, self.packet_size)
-
-
-_IDENTITY = np.zeros(0, dtype=np.int32)
-
-
-def _identity(n):
-    """``np.arange(n, dtype=np.int32)``, read-only, sharing its memory with every call's."""
-    global _IDENTITY
-    identity = _IDENTITY            # (another thread may replace it: keep this one)
-    if len(identity) < n:
-        identity = np.arange(n, dtype=np.int32)
-        identity.flags.writeable = False
-        _IDENTITY = identity
-    return identity[:n]
+        """``order`` is :func:`raysort.sdk.identity_order` (writing a new ``arange`` per
+        batch, and checking it, cost the frame two passes over memory)."""
+        return identity_order(len(rays)), fixed_packets(packets, self.packet_size)

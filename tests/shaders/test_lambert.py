@@ -11,8 +11,11 @@ import numpy as np
 import pytest
 
 import raysort
+from raysort.camera import Camera
+from raysort.errors import PluginContractError
+from raysort.procedural import PLANE_CAMERA, plane_under_sky
 from raysort.rays import MAX_PACKET
-from raysort.scene import PointLight
+from raysort.scene import PointLight, Scene
 from raysort.reference import brute_force
 from raysort.shaders import lambert
 from raysort.workloads import workload
@@ -236,3 +239,25 @@ def test_shade_continues_every_hit_as_numpy_computes_it(each_isa, name, more_lig
         np.testing.assert_array_equal(shadow.contribution, contribution[:, lit])
     else:
         assert bounce.shadow is None
+
+
+@pytest.mark.parametrize("check_plugins", [True, False])
+def test_paths_breaking_the_bounce_contract_stop_the_render(each_isa, check_plugins):
+    """``lambert`` checks the paths it makes as it writes them (the pipeline's
+    ``check_bounce`` then reads only their types and shapes): a light so bright that
+    its shadow rays' contributions overflow float32 stops the render with an error that
+    names the shader and the contribution, from the kernel's check on every ISA, with or
+    without the pipeline's checks; one a million times dimmer renders."""
+    def scene(intensity):
+        mesh = plane_under_sky(size=3.0)
+        return Scene.from_mesh(mesh.vertices, mesh.faces, camera=Camera(**PLANE_CAMERA),
+                               albedo=0.5, name="lit",
+                               lights=[PointLight((0, 0.01, 0), (intensity,) * 3)])
+
+    pipe = raysort.Pipeline(scene(3e38), check_plugins=check_plugins)
+    with pytest.raises(PluginContractError, match=r"ShadowRays\.contribution\[:, \d+\] is "
+                                                  r"\[(inf|-inf|nan)") as info:
+        pipe.render(16, 16, spp=1)
+    assert (info.value.kind, info.value.name) == ("shaders", "lambert")
+    image = raysort.Pipeline(scene(3e32), check_plugins=check_plugins).render(16, 16, 1).image
+    assert np.isfinite(image).all() and image.max() > 1e32
