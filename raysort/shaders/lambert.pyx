@@ -106,6 +106,24 @@ cdef inline void prefetch_new_rays(float *rays, Py_ssize_t ray_stride, float *we
         rs_prefetchw(<char *> weight + r * weight_stride)
     rs_prefetchw(parent)
 
+cdef enum:
+    CHECK_RUN = 512         # new paths checked together (18 kB of parents and weights)
+
+
+cdef inline int new_paths_bad(const int32_t[::1] parent, const float[:, ::1] weight,
+                              const int32_t *slot, int a, int b, int n,
+                              uint32_t slots) noexcept nogil:
+    """The Bounce contract's rules (``_checks.pxd``, as :func:`raysort.contract.check_bounce`)
+    on the new paths ``a..b``: parents ascending in [0, n) (from ``parent[a - 1]``),
+    weights finite and, unless ``slot`` is NULL, slots in [0, slots)."""
+    if b <= a:
+        return 0
+    return parents_weights_bad(&parent[0], <const uint32_t *> &weight[0, 0],
+                               <const uint32_t *> &weight[1, 0],
+                               <const uint32_t *> &weight[2, 0], a, b, n) \
+        | (slots_bad(slot, a, b, slots) if slot != NULL else 0)
+
+
 cdef inline int32_t toward_light(const HitBlock *b, int h, float lx, float ly, float lz,
                                  float *w0, float *w1, float *w2, float *dist,
                                  float *weight) noexcept nogil:
@@ -208,8 +226,9 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                       float[:, ::1] sh_rays, int32_t[::1] sh_parent, int32_t[::1] sh_slot,
                       float[:, ::1] sh_contrib, int *n_next, int *n_shadow,
                       int *paths_bad) noexcept nogil:
-    cdef int n = prim.shape[0], blk, i0, i, f, c, h, j, line, count, k = 0, m = 0, e, m0
+    cdef int n = prim.shape[0], blk, i0, i, f, c, h, j, line, count, k = 0, m = 0, e
     cdef int bad = 0                   # a new path breaks the Bounce contract (see below)
+    cdef int k_done = 0, m_done = 0    # the new paths before these are checked
     cdef uint32_t slots = <uint32_t> radiance.shape[0]
     cdef uint32_t dim = RS_DIM_BOUNCE + RS_DIMS_PER_BOUNCE * prm.depth   # types.h's budget
     cdef uint32_t seed_k = seed_key(prm.seed)
@@ -236,6 +255,14 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
         iota[h] = h
     for blk in range((n + LANES - 1) // LANES):
         i0 = blk * LANES
+        # the Bounce contract's rules on the paths written since the last check, while
+        # they are in L1 (the pipeline's check_bounce need not read them again)
+        if k - k_done >= CHECK_RUN:
+            bad |= new_paths_bad(next_parent, next_thr, NULL, k_done, k, n, slots)
+            k_done = k
+        if m - m_done >= CHECK_RUN:
+            bad |= new_paths_bad(sh_parent, sh_contrib, &sh_slot[0], m_done, m, n, slots)
+            m_done = m
         # Prefetches (hints; the results do not depend on them).  The kernel reads
         # fourteen rows and writes up to twenty-five side by side, more streams than
         # the hardware prefetchers follow: a later block's input lines, the next
@@ -313,20 +340,12 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
         leave_surfaces(&b)
         # next-event estimation toward point lights: a shadow ray per lit hit and light,
         # in the order of the hits (the shadow rays' parents ascend)
-        m0 = m
         if light_pos.shape[0] == 1:
             m = light_lanes(&b, reflect, hit_slot, light_pos, light_int, sh_rays, sh_parent,
                             sh_slot, sh_contrib, m)
         elif light_pos.shape[0] > 1:
             m = light_hits(&b, reflect, hit_slot, light_pos, light_int, sh_rays, sh_parent,
                            sh_slot, sh_contrib, m)
-        # the Bounce contract's rules (_checks.pxd) on the paths just written, while they
-        # are in L1: the pipeline then need not read them again (check_bounce)
-        if m > m0:
-            bad |= parents_weights_bad(&sh_parent[0], <const uint32_t *> &sh_contrib[0, 0],
-                                       <const uint32_t *> &sh_contrib[1, 0],
-                                       <const uint32_t *> &sh_contrib[2, 0], m0, m, n) \
-                | slots_bad(&sh_slot[0], m0, m, slots)
         if not bounce:
             continue
         # a cosine-weighted bounce per hit (per survivor of Russian roulette, off by default)
@@ -362,10 +381,9 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
             for c in range(3):
                 keep_lanes(reflect[c], b.n, keep, &next_thr[c, k], count)
             keep_lanes(b.ray, b.n, keep, &next_parent[k], count)
-        bad |= parents_weights_bad(&next_parent[0], <const uint32_t *> &next_thr[0, 0],
-                                   <const uint32_t *> &next_thr[1, 0],
-                                   <const uint32_t *> &next_thr[2, 0], k, k + count, n)
         k += count
+    bad |= new_paths_bad(next_parent, next_thr, NULL, k_done, k, n, slots) \
+        | new_paths_bad(sh_parent, sh_contrib, &sh_slot[0] if m else NULL, m_done, m, n, slots)
     n_next[0] = k
     n_shadow[0] = m
     paths_bad[0] = bad
