@@ -9,8 +9,8 @@ from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.math cimport INFINITY
 from libc.string cimport memcpy
 from raysort._checks cimport offsets_bad, packet_bounds, range_bad, slot_bad
-from raysort._types cimport (rs_isa_name, RS_MAX_PACKET, RS_RAY_ROWS, RS_PACKET_ROWS,
-                             RS_PACKET_T)
+from raysort._types cimport (rs_isa_name, RS_MAX_PACKET, RS_RAY_ROWS, RS_RAY_TMIN,
+                             RS_RAY_TMAX, RS_PACKET_ROWS, RS_PACKET_T)
 
 import numpy as np
 
@@ -24,6 +24,7 @@ cdef extern from "raysort/gather.h" nogil:
 cdef extern from "raysort/lanes.h" nogil:
     int rs_zero_bytes16(const uint8_t *p)
     int rs_lowest(int bits)
+    void rs_fill_uncached(float *p, int64_t n, float value)
 
 
 cdef enum:
@@ -83,6 +84,20 @@ def fixed_offsets(const int32_t[::1] packets, int32_t size):
                 start += size
         offsets[k] = packets[m]
     return out
+
+
+def pad_rays(float[:, ::1] data, Py_ssize_t a, Py_ssize_t b):
+    """Make lanes ``a..b`` of a ray batch's rows (``RayBatch.data``) padding: origin and
+    direction 0, tmin +inf, tmax -inf (inactive), with stores that bypass the caches
+    (nothing reads padding soon)."""
+    cdef int r
+    if data.shape[0] != RS_RAY_ROWS or not 0 <= a <= b <= data.shape[1]:
+        raise ValueError("pad_rays: the rows of a ray batch and 0 <= a <= b <= capacity")
+    with nogil:
+        for r in range(RS_RAY_ROWS):
+            rs_fill_uncached(&data[r, a] if b > a else NULL, b - a,
+                             INFINITY if r == RS_RAY_TMIN else
+                             -INFINITY if r == RS_RAY_TMAX else 0.0)
 
 
 def sample_paths(const int32_t[::1] pixels, const int32_t[::1] slots,

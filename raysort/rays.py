@@ -249,10 +249,8 @@ class RayBatch:
         """Keep the first ``n`` rays (in place; the rest become inactive padding); returns self."""
         if not 0 <= n <= self.n:
             raise ValueError(f"cannot truncate {self.n} rays to {n}")
-        self.data[_O:_O + 3, n:self.n] = 0.0          # lanes no longer rays: padding
-        self.data[_D:_D + 3, n:self.n] = 0.0
-        self.data[_TMIN, n:] = np.inf
-        self.data[_TMAX, n:] = -np.inf
+        if n < self.n:      # lanes no longer rays: padding (lanes past self.n are already)
+            isa.module("_gather").pad_rays(self.data, n, self.n)
         self.n = int(n)
         if self.prev_t is not None:
             self.prev_t = self.prev_t[:n]

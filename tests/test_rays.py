@@ -10,6 +10,7 @@ inactive: tmin=+inf, t=-inf, prim=-1).
 import numpy as np
 import pytest
 
+import raysort.isa
 from raysort.errors import ConfigError
 from raysort.rays import (MAX_PACKET, Hits, Packets, RayBatch, RayRow, add_unoccluded, gather,
                           scatter, scatter_occluded)
@@ -187,8 +188,8 @@ def test_truncate(rng):
             b.truncate(k)
 
 
-@pytest.mark.parametrize("n", [1, 5, 4097])
-def test_an_unfilled_batch_written_then_truncated_has_clean_padding(rng, n):
+@pytest.mark.parametrize("n", [1, 5, 4097, 70_001])
+def test_an_unfilled_batch_written_then_truncated_has_clean_padding(each_isa, rng, n):
     """RayBatch._unfilled (the shaders' output): the layout of RayBatch(n); after its
     writer truncates it, the lanes past the kept rays are padding as RayBatch's are
     (zero origin and direction, inactive), whatever the memory held before."""
@@ -207,6 +208,25 @@ def test_an_unfilled_batch_written_then_truncated_has_clean_padding(rng, n):
     assert (bits(b.data[rows, k:]) == 0).all()
     assert ((b.data[RayRow.tmin, k:] == np.inf).all()
             and (b.data[RayRow.tmax, k:] == -np.inf).all())
+
+
+@pytest.mark.parametrize("a, b", [(0, 0), (0, 1), (3, 4), (1, 17), (5, 100), (64, 1000),
+                                  (13, 2064)])
+def test_pad_rays_writes_padding_to_those_lanes_only(each_isa, rng, a, b):
+    """The padding kernel (``truncate``'s, with stores that bypass the caches) at every
+    alignment: lanes a..b get origin and direction 0 and tmin +inf, tmax -inf; every
+    other lane keeps its bits."""
+    data = random_rays(rng, 2064, BOX).data
+    before = data.copy()
+    raysort.isa.module("_gather").pad_rays(data, a, b)
+    rows = [RayRow.ox, RayRow.oy, RayRow.oz, RayRow.dx, RayRow.dy, RayRow.dz]
+    assert (bits(data[rows, a:b]) == 0).all()
+    assert (data[RayRow.tmin, a:b] == np.inf).all() and (data[RayRow.tmax, a:b] == -np.inf).all()
+    outside = np.ones(data.shape[1], bool)
+    outside[a:b] = False
+    assert np.array_equal(bits(data[:, outside]), bits(before[:, outside]))
+    with pytest.raises(ValueError):
+        raysort.isa.module("_gather").pad_rays(data, b, a - 1)
 
 
 def test_hits_defaults():

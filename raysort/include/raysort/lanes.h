@@ -432,6 +432,27 @@ RS_INLINE int rs_zero_bytes16(const uint8_t *p)
 #endif
 }
 
+/* p[0, n) = value with stores that bypass the caches where there is SSE2 (and a
+ * plain loop elsewhere): for memory no one reads soon, such as the padding lanes
+ * past a truncated ray batch's rays, so that it costs no read of the lines first
+ * and evicts nothing.  Ends with a store fence. */
+RS_INLINE void rs_fill_uncached(float *p, int64_t n, float value)
+{
+    int64_t i = 0;
+#if RS_SSE
+    __m128 v = _mm_set1_ps(value);
+    for (; i < n && ((uintptr_t)(p + i) & 15); ++i)
+        p[i] = value;
+    for (; i + 4 <= n; i += 4)
+        _mm_stream_ps(p + i, v);
+#endif
+    for (; i < n; ++i)
+        p[i] = value;
+#if RS_SSE
+    _mm_sfence();
+#endif
+}
+
 /* The lanes h of [0, n) (n <= 64) whose flag[h] is not 0, as bit h of a mask:
  * RS_SW lanes at a time (one comparison each). */
 RS_INLINE uint64_t rs_mask64(const int32_t *flag, int n)
