@@ -2,7 +2,8 @@
 
 A kernel is one ``packet_fn`` that traces one sub-packet, described by a
 :c:type:`Kernel` that also declares the scratch memory it needs.  Its module
-hands that to :func:`run`, which checks the packets, loops over the
+hands that to :func:`run`, which checks the packets (:func:`check_packets`: their
+arrays fit together, whoever built them), loops over the
 sub-packets without the GIL, owns the scratch memory (allocated once per call)
 and sums the Table I counters::
 
@@ -56,6 +57,9 @@ cdef struct Kernel:
     size_t stack_bytes          # scratch bytes per level: a stack's entries pushed per level
     size_t group_bytes          # scratch bytes per 4-ray group (e.g. group ids)
     size_t level_group_bytes    # scratch bytes per level and 4-ray group (e.g. lane masks)
+
+
+cdef int check_packets(object packets) except -1
 
 
 cdef object run(const Kernel *kernel, object bvh, object packets, bint any_hit,

@@ -8,7 +8,8 @@ counters into a :class:`raysort.stats.Counters`.
 from libc.stdlib cimport malloc, free
 from libc.string cimport memset
 from libc.stdint cimport int32_t, uint8_t
-from raysort._types cimport rs_node, rs_tri, rs_rays, rs_counters, RS_MAX_PACKET, rays_view
+from raysort._types cimport (rs_node, rs_tri, rs_rays, rs_counters, RS_MAX_PACKET,
+                             RS_PACKET_ROWS, rays_view)
 
 from raysort.errors import PluginContractError
 from raysort.stats import Counters
@@ -33,6 +34,39 @@ cdef const void *array_start(object array, object name) except? NULL:
     return <const void *> &raw[0] if raw.shape[0] else NULL
 
 
+cdef int check_packets(object packets) except -1:
+    """ValueError unless the arrays of ``packets`` fit together, so that a kernel stays
+    inside them whoever built them (a script may hand a traversal packets of its own):
+    ``rows`` (``RS_PACKET_ROWS``, capacity) float32; ``prim``, ``u``, ``v`` and
+    ``index`` one value per lane; ``starts`` and ``counts`` one per sub-packet; each
+    sub-packet 0..RS_MAX_PACKET rays from a lane that is a multiple of 4, its lanes
+    rounded up to 4 inside the capacity.  Returns the widest sub-packet's rays."""
+    cdef const float[:, ::1] rows = packets.rows
+    cdef const int32_t[::1] prim = packets.prim, index = packets.index
+    cdef const float[::1] u = packets.u, v = packets.v
+    cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
+    cdef Py_ssize_t k, capacity = rows.shape[1]
+    cdef int widest = 0
+    if rows.shape[0] != RS_PACKET_ROWS:
+        raise ValueError(f"packets.rows must have {RS_PACKET_ROWS} rows, got {rows.shape[0]}")
+    if not (prim.shape[0] == u.shape[0] == v.shape[0] == index.shape[0] == capacity):
+        raise ValueError(f"packets.prim, u, v and index must hold one value per lane "
+                         f"({capacity}), got {prim.shape[0]}, {u.shape[0]}, {v.shape[0]} "
+                         f"and {index.shape[0]}")
+    if counts.shape[0] != starts.shape[0]:
+        raise ValueError(f"packets.starts and counts must be of one length, got "
+                         f"{starts.shape[0]} and {counts.shape[0]}")
+    for k in range(starts.shape[0]):
+        if (starts[k] < 0 or starts[k] % 4 or not 0 <= counts[k] <= RS_MAX_PACKET
+                or starts[k] + ((<Py_ssize_t> counts[k] + 3) & ~3) > capacity):
+            raise ValueError(f"packets: sub-packet {k} of {counts[k]} rays from lane "
+                             f"{starts[k]} is not 0..{RS_MAX_PACKET} rays from a multiple "
+                             f"of 4 inside the {capacity} lanes")
+        if counts[k] > widest:
+            widest = counts[k]
+    return widest
+
+
 cdef object run(const Kernel *kernel, object bvh, object packets, bint any_hit,
                 object tree=None, object leaves=None):
     """Trace ``packets`` through ``bvh`` with ``kernel``; returns the Counters.
@@ -40,6 +74,7 @@ cdef object run(const Kernel *kernel, object bvh, object packets, bint any_hit,
     ``tree`` and ``leaves`` (C-contiguous arrays the caller keeps alive, e.g.
     ``bvh.wide``) are handed to the kernel as ``Geometry.tree`` and ``.leaves``.
     """
+    cdef int widest = check_packets(packets)
     cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
     cdef const uint8_t[::1] node_bytes = bvh.nodes.view("u1").reshape(-1)
     cdef const uint8_t[::1] tri_bytes = bvh.triangles.view("u1").reshape(-1)
@@ -47,19 +82,10 @@ cdef object run(const Kernel *kernel, object bvh, object packets, bint any_hit,
     cdef rs_rays rays = rays_view(packets.rows, packets.prim, packets.u, packets.v)
     cdef Scratch w
     cdef rs_counters c
-    cdef int k, i, widest = 0, n = starts.shape[0]
+    cdef int k, i, n = starts.shape[0]
     cdef size_t stack_size, groups_size, level_groups_size
     cdef char *block
 
-    for k in range(n):
-        if counts[k] > widest:
-            widest = counts[k]
-        if starts[k] % 4:
-            raise PluginContractError(f"sub-packet {k} starts at lane {starts[k]}, "
-                                      "not a multiple of 4")
-    if widest > RS_MAX_PACKET:
-        raise PluginContractError(f"a sub-packet of {widest} rays is wider than the "
-                                  f"{RS_MAX_PACKET} a traversal accepts")
     if n == 0 or node_bytes.shape[0] == 0:
         return Counters()
 

@@ -33,11 +33,12 @@ from libc.stdlib cimport malloc, free
 from raysort._checks cimport offsets_bad
 from raysort._types cimport (rs_node4, rs_node8, rs_tri, rs_tri8, rs_rays, rs_counters, rays_view,
                              RS_MAX_PACKET, RS_RAY_ROWS)
+from raysort.sdk.driver cimport check_packets
 
 import numpy as np
 
 from raysort import isa
-from raysort.sdk import ConfigError, Counters, PluginContractError, Traversal, boolean, integer
+from raysort.sdk import ConfigError, Counters, Traversal, boolean, integer
 
 
 cdef extern from "raysort/stream.h" nogil:
@@ -122,17 +123,13 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
     """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa);
     with ``frustum`` (8-wide tree only) coherent chunks of a sub-packet take the
     ``frustum`` traversal's walk and only the others join the streams."""
+    check_packets(packets)
     cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
-    cdef int capacity = packets.capacity, n_packets = starts.shape[0]
+    cdef int n_packets = starts.shape[0]
     cdef int k, i, m, size, ok, levels, s, e
     cdef rs_frustum_bounds bounds
     cdef rs_frustum_entry *chunk_stack = NULL
     cdef long long active = 0
-    for k in range(n_packets):
-        if starts[k] < 0 or counts[k] < 0 or <long long> starts[k] + counts[k] > capacity:
-            raise PluginContractError(f"stream: sub-packet {k} (lanes {starts[k]}.."
-                                      f"{starts[k] + counts[k]}) lies outside the "
-                                      f"{capacity} lanes of the batch")
     if n_packets == 0 or len(bvh.triangles) == 0:
         return Counters()
     node_array, leaf_array, depth = _tree(bvh, width)
