@@ -121,19 +121,33 @@ def sample_paths(const int32_t[::1] pixels, const int32_t[::1] slots,
     return pixel, sample, slot
 
 
-def follow_paths(const int32_t[::1] parent, const int32_t[::1] pixel,
-                 const int32_t[::1] sample, const int32_t[::1] slot, const float[::1] t):
+def follow_paths(const int32_t[::1] parent, pixel_array, sample_array, slot_array, t_array):
     """``(pixel, sample, slot, t)`` of the rays ``parent`` (each an index into the four
-    arrays): the paths a shader's next rays continue and the hit distance each path
-    ended its last ray at, in one pass (``Paths.take`` and ``t[parent]``); a run of 64
-    consecutive parents is copied row by row.  IndexError, with nothing returned, at a
-    parent out of range."""
+    arrays: int32, and float32 ``t``): the paths a shader's next rays continue and the
+    hit distance each path ended its last ray at, in one pass (``Paths.take`` and
+    ``t[parent]``); a run of 64 consecutive parents is copied row by row, and when every
+    ray went on (``parent`` is ``0, 1, ..., n - 1``: a closed scene's first bounce, most
+    batches) the four arrays are returned themselves.  IndexError, with nothing
+    returned, at a parent out of range."""
+    cdef const int32_t[::1] pixel = pixel_array, sample = sample_array, slot = slot_array
+    cdef const float[::1] t = t_array
     cdef Py_ssize_t i, e, k, m = parent.shape[0]
     cdef uint32_t n = pixel.shape[0]
     cdef int32_t p
     cdef int bad = 0, run
     if sample.shape[0] != n or slot.shape[0] != n or t.shape[0] != n:
         raise ValueError("follow_paths: pixel, sample, slot and t must be of one length")
+    if m == n:
+        with nogil:
+            i = 0
+            while i < m and not bad:
+                e = min(i + 16 * RUN, m)
+                for k in range(i, e):
+                    bad |= parent[k] != k
+                i = e
+        if not bad:
+            return pixel_array, sample_array, slot_array, t_array
+        bad = 0
     new_pixel = np.empty(m, dtype=np.int32)
     new_sample = np.empty(m, dtype=np.int32)
     new_slot = np.empty(m, dtype=np.int32)

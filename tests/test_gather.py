@@ -280,15 +280,21 @@ def test_follow_paths_is_fancy_indexing_and_refuses_a_parent_out_of_range():
     swapped[[1, 2]] = 2, 1                      # first and last 63 apart, yet not a run
     runs = np.concatenate([np.arange(128), np.arange(200, 330), [400, 402],
                            np.arange(500, 564), np.arange(n - 64, n)])
+    repeat = np.arange(n)
+    repeat[600] = 599                           # n parents, ascending, not every ray
     for parent in (np.sort(rng.integers(0, n, 700)), np.arange(n), np.zeros(0), runs,
-                   swapped, np.r_[swapped, np.arange(64, 200)]):
+                   swapped, np.r_[swapped, np.arange(64, 200)], repeat, repeat[::-1]):
         parent = parent.astype(np.int32)
         got = follow_paths(parent, pixel, sample, slot, t)
         for mine, array in zip(got, (pixel, sample, slot, t)):
             assert mine.dtype == array.dtype and np.array_equal(mine, array[parent])
+            # every ray went on: the arrays themselves, no copies
+            assert (mine is array) == np.array_equal(parent, np.arange(n))
     for bad in (-1, n):
         with pytest.raises(IndexError, match="out of range"):
             follow_paths(np.array([0, bad], np.int32), pixel, sample, slot, t)
+        with pytest.raises(IndexError, match=rf"parent\[{n - 1}\]"):
+            follow_paths(np.r_[np.arange(n - 1), bad].astype(np.int32), pixel, sample, slot, t)
         almost = np.arange(64, dtype=np.int32)
         almost[10] = bad                        # inside what begins like a run
         with pytest.raises(IndexError, match=r"parent\[10\]"):
