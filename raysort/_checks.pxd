@@ -11,7 +11,7 @@ Each returns non-zero when the element breaks its contract, written without
 branches so that loops over a block vectorise.  A float ``x`` is finite exactly
 when ``x - x == 0``.
 """
-from libc.stdint cimport int32_t, uint8_t, uint32_t
+from libc.stdint cimport int32_t, uint8_t, uint32_t, uint64_t
 
 
 cdef inline int ray_bad(float ox, float oy, float oz, float dx, float dy, float dz, float tmin,
@@ -121,6 +121,15 @@ cdef inline int nonfinite32(const uint32_t *x, Py_ssize_t a, Py_ssize_t b) noexc
     cdef int bad = 0
     for i in range(a, b):
         bad |= (x[i] & 0x7F800000u) == 0x7F800000u
+    return bad
+
+
+cdef inline int nonfinite64(const uint64_t *x, Py_ssize_t a, Py_ssize_t b) noexcept nogil:
+    """:func:`nonfinite32` for float64 bits."""
+    cdef Py_ssize_t i
+    cdef int bad = 0
+    for i in range(a, b):
+        bad |= (x[i] & 0x7FF0000000000000ull) == 0x7FF0000000000000ull
     return bad
 
 

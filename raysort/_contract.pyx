@@ -17,7 +17,7 @@ from libc.stdlib cimport calloc, free
 from libc.string cimport memcmp, memset
 from raysort._checks cimport (ray_bad, closest_bad, any_hit_bad, large_packet,
                               packet_bounds, slot_bad, sub_packet_bad, nonfinite32,
-                              parents_weights_bad, slots_bad)
+                              nonfinite64, parents_weights_bad, slots_bad)
 from raysort._types cimport (RS_RAY_OX, RS_RAY_OY, RS_RAY_OZ, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ,
                              RS_RAY_TMIN, RS_RAY_TMAX, RS_RAY_ROWS, RS_PACKET_ROWS,
                              RS_PACKET_TMIN, RS_PACKET_T)
@@ -373,15 +373,6 @@ def index_array(x, int64_t lo, int64_t hi, bint ascending):
             code = index_kernel(&x64[0] if x64.shape[0] else NULL, x64.shape[0], lo, hi,
                                 ascending, &where)
     return code, where
-
-
-cdef inline int nonfinite64(const uint64_t *x, Py_ssize_t a, Py_ssize_t b) noexcept nogil:
-    """:func:`nonfinite32` for float64 bits."""
-    cdef Py_ssize_t i
-    cdef int bad = 0
-    for i in range(a, b):
-        bad |= (x[i] & 0x7FF0000000000000ull) == 0x7FF0000000000000ull
-    return bad
 
 
 cdef int finite_kernel(const real_t *x, Py_ssize_t n, Py_ssize_t *where) noexcept nogil:
