@@ -115,21 +115,19 @@ cdef inline int offsets_bad(const int32_t *offsets, Py_ssize_t n_sub, int32_t n,
     return bad
 
 
-cdef inline int nonfinite32(const uint32_t *x, Py_ssize_t a, Py_ssize_t b) noexcept nogil:
-    """Any of the float32 values x[a:b] (as bits) infinite or NaN: all exponent bits set."""
-    cdef Py_ssize_t i
-    cdef int bad = 0
-    for i in range(a, b):
-        bad |= (x[i] & 0x7F800000u) == 0x7F800000u
-    return bad
+ctypedef fused float_bits:     # a float32's bits, or a float64's
+    uint32_t
+    uint64_t
 
 
-cdef inline int nonfinite64(const uint64_t *x, Py_ssize_t a, Py_ssize_t b) noexcept nogil:
-    """:func:`nonfinite32` for float64 bits."""
+cdef inline int nonfinite(const float_bits *x, Py_ssize_t a, Py_ssize_t b) noexcept nogil:
+    """Any of the float values x[a:b] (as bits: uint32 for float32, uint64 for float64)
+    infinite or NaN: all exponent bits set."""
     cdef Py_ssize_t i
     cdef int bad = 0
+    cdef float_bits ones = 0x7F800000u if float_bits is uint32_t else 0x7FF0000000000000ull
     for i in range(a, b):
-        bad |= (x[i] & 0x7FF0000000000000ull) == 0x7FF0000000000000ull
+        bad |= (x[i] & ones) == ones
     return bad
 
 
@@ -141,8 +139,8 @@ cdef inline int parents_weights_bad(const int32_t *parent, const uint32_t *w0,
     cdef Py_ssize_t i
     cdef int bad = 0
     if a == 0 and b > 0:
-        bad = (<uint32_t> parent[0] >= n) | nonfinite32(w0, 0, 1) | nonfinite32(w1, 0, 1) \
-            | nonfinite32(w2, 0, 1)
+        bad = ((<uint32_t> parent[0] >= n) | nonfinite(w0, 0, 1) | nonfinite(w1, 0, 1)
+               | nonfinite(w2, 0, 1))
         a = 1
     for i in range(a, b):
         bad |= ((<uint32_t> parent[i] >= n) | (parent[i] < parent[i - 1])

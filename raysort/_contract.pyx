@@ -16,8 +16,8 @@ from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t, uint64_t
 from libc.stdlib cimport calloc, free
 from libc.string cimport memcmp, memset
 from raysort._checks cimport (ray_bad, closest_bad, any_hit_bad, large_packet,
-                              packet_bounds, slot_bad, sub_packet_bad, nonfinite32,
-                              nonfinite64, parents_weights_bad, slots_bad)
+                              packet_bounds, slot_bad, sub_packet_bad, nonfinite,
+                              parents_weights_bad, slots_bad)
 from raysort._types cimport (RS_RAY_OX, RS_RAY_OY, RS_RAY_OZ, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ,
                              RS_RAY_TMIN, RS_RAY_TMAX, RS_RAY_ROWS, RS_PACKET_ROWS,
                              RS_PACKET_TMIN, RS_PACKET_T)
@@ -381,9 +381,9 @@ cdef int finite_kernel(const real_t *x, Py_ssize_t n, Py_ssize_t *where) noexcep
     while a < n:
         b = block_end(a, n)
         if real_t is float:
-            bad = nonfinite32(<const uint32_t *> x, a, b)
+            bad = nonfinite(<const uint32_t *> x, a, b)
         else:
-            bad = nonfinite64(<const uint64_t *> x, a, b)
+            bad = nonfinite(<const uint64_t *> x, a, b)
         if bad:
             for i in range(a, b):
                 if (x[i] - x[i]) != 0:
@@ -445,9 +445,9 @@ cdef int paths_kernel(const float *const *r, const int32_t *parent, const float 
                     return BAD_PARENT_RANGE
                 if i and parent[i] < parent[i - 1]:
                     return BAD_PARENT_ORDER
-                if nonfinite32(<const uint32_t *> w[0], i, i + 1) \
-                        | nonfinite32(<const uint32_t *> w[1], i, i + 1) \
-                        | nonfinite32(<const uint32_t *> w[2], i, i + 1):
+                if nonfinite(<const uint32_t *> w[0], i, i + 1) \
+                        | nonfinite(<const uint32_t *> w[1], i, i + 1) \
+                        | nonfinite(<const uint32_t *> w[2], i, i + 1):
                     return BAD_WEIGHT
                 if slot != NULL and slot_bad(slot[i], slots):
                     return BAD_SLOT
