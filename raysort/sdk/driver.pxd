@@ -2,7 +2,7 @@
 
 A kernel is one ``packet_fn`` that traces one sub-packet, described by a
 :c:type:`Kernel` that also declares the scratch memory it needs.  Its module
-hands that to :func:`run`, which checks the packets (:func:`check_packets`: their
+hands that to :func:`run`, which checks the packets (:func:`check_packet_layout`: their
 arrays fit together, whoever built them), loops over the
 sub-packets without the GIL, owns the scratch memory (allocated once per call)
 and sums the Table I counters::
@@ -59,7 +59,7 @@ cdef struct Kernel:
     size_t level_group_bytes    # scratch bytes per level and 4-ray group (e.g. lane masks)
 
 
-cdef int check_packets(object packets) except -1
+cdef int check_packet_layout(object packets) except -1
 
 
 cdef object run(const Kernel *kernel, object bvh, object packets, bint any_hit,

@@ -34,7 +34,7 @@ cdef const void *array_start(object array, object name) except? NULL:
     return <const void *> &raw[0] if raw.shape[0] else NULL
 
 
-cdef int check_packets(object packets) except -1:
+cdef int check_packet_layout(object packets) except -1:
     """ValueError unless the arrays of ``packets`` fit together, so that a kernel stays
     inside them whoever built them (a script may hand a traversal packets of its own):
     ``rows`` (``RS_PACKET_ROWS``, capacity) float32; ``prim``, ``u``, ``v`` and
@@ -74,7 +74,7 @@ cdef object run(const Kernel *kernel, object bvh, object packets, bint any_hit,
     ``tree`` and ``leaves`` (C-contiguous arrays the caller keeps alive, e.g.
     ``bvh.wide``) are handed to the kernel as ``Geometry.tree`` and ``.leaves``.
     """
-    cdef int widest = check_packets(packets)
+    cdef int widest = check_packet_layout(packets)
     cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
     cdef const uint8_t[::1] node_bytes = bvh.nodes.view("u1").reshape(-1)
     cdef const uint8_t[::1] tri_bytes = bvh.triangles.view("u1").reshape(-1)

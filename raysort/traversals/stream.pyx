@@ -33,7 +33,7 @@ from libc.stdlib cimport malloc, free
 from raysort._checks cimport offsets_bad
 from raysort._types cimport (rs_node4, rs_node8, rs_tri, rs_tri8, rs_rays, rs_counters, rays_view,
                              RS_MAX_PACKET, RS_RAY_ROWS)
-from raysort.sdk.driver cimport check_packets
+from raysort.sdk.driver cimport check_packet_layout
 
 import numpy as np
 
@@ -123,7 +123,7 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
     """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa);
     with ``frustum`` (8-wide tree only) coherent chunks of a sub-packet take the
     ``frustum`` traversal's walk and only the others join the streams."""
-    check_packets(packets)
+    check_packet_layout(packets)
     cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
     cdef int n_packets = starts.shape[0]
     cdef int k, i, m, size, ok, levels, s, e

@@ -1,7 +1,7 @@
 """A traversal called from a script with packets whose arrays do not fit together
 (``packets_cases.py``: a sub-packet outside the lanes, arrays too short or missing rows)
 raises a ValueError that says so, never a crash: every built-in traversal checks them
-before its kernel reads a lane (``raysort.sdk.driver.check_packets``).  The cases run in
+before its kernel reads a lane (``raysort.sdk.driver.check_packet_layout``).  The cases run in
 a child process per traversal, so a crash fails the test instead of the test run."""
 import json
 import os
