@@ -22,12 +22,14 @@ import sys
 import tempfile
 from pathlib import Path
 
+import numpy
 from Cython.Build import cythonize
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
 
 HERE = Path(__file__).parent
-INCLUDE = "raysort/include"
+# raysort's C headers, and NumPy's (sorters._keysort calls NumPy's sort through its C API)
+INCLUDES = ["raysort/include", numpy.get_include()]
 
 # Kernel modules compiled once per ISA (dotted, relative to the raysort package).  A
 # kernel module added here is called through raysort.isa.module("<name>"); see the
@@ -119,7 +121,7 @@ def _base_extensions():
         Extension(
             ".".join(src.relative_to(HERE).with_suffix("").parts),
             [str(src.relative_to(HERE))],
-            include_dirs=[INCLUDE],
+            include_dirs=INCLUDES,
             define_macros=MACROS,
             extra_compile_args=BASE_ARGS + ([] if MSVC or not X86 else ["-msse2"]),
         )
@@ -146,7 +148,7 @@ def _isa_extensions(isas):
             exts.append(Extension(
                 f"raysort._isa.{isa}.{name}",
                 [str(wrapper.relative_to(HERE))],
-                include_dirs=[INCLUDE],
+                include_dirs=INCLUDES,
                 define_macros=MACROS + macros,
                 extra_compile_args=BASE_ARGS + flags,
                 depends=[str(c_file.relative_to(HERE))],     # rebuilt when the C changes

@@ -21,16 +21,18 @@ A key that reads only the high byte of each coordinate (every default key) is
 looked up two coordinates at a time (:func:`plan_lookups`): three loads per ray.
 
 Keys are left aligned in a uint64: the sort looks at the top ``8 * digits``
-bits.  Within every large packet, ``(key, ray)`` pairs are sorted by a stable
-LSD radix sort on the bits from the highest to the lowest one that differ
-between the packet's keys, in digits of 8 to :data:`MAX_DIGIT_BITS` bits
-(:func:`digit_plan`; a pass whose digit is the same for every key is skipped;
-the ray's index rides in the key's low bits, below the sorted ones, whenever
-they have room for it), optionally after Garanzha and Loop's compression: runs
-of equal keys in input order become one chunk, only chunks are sorted, and the
-runs are copied back in chunk order (the result is the same order; the work is
-on fewer items when the input has long runs, so it is skipped for a packet
-with more than half as many runs as rays).  The sorted run is then cut into
+bits.  Within every large packet, ``(key, ray)`` pairs are sorted stably,
+optionally after Garanzha and Loop's compression: runs of equal keys in input
+order become one chunk, only chunks are sorted, and the runs are copied back in
+chunk order (the result is the same order; the work is on fewer items when the
+input has long runs, so it is skipped for a packet with more than half as many
+runs as rays).  Whenever the key's low bits, below the sorted ones, have room
+for it, the ray's (or chunk's) index rides there: the packed keys are then all
+different, and the avx512 build sorts them with NumPy's quicksort (see
+``sort_u64`` below).  Every other case is a stable LSD radix sort on the bits
+from the highest to the lowest one that differ between the packet's keys, in
+digits of 8 to :data:`MAX_DIGIT_BITS` bits (:func:`digit_plan`; a pass whose
+digit is the same for every key is skipped).  The sorted run is then cut into
 sub-packets of at most ``packet_size`` rays, and also wherever the top
 ``split_bits`` bits of the key change.
 
@@ -41,6 +43,7 @@ marks such rays inactive anyway.
 from libc.math cimport INFINITY, copysignf, fabsf
 from libc.stdint cimport int32_t, int64_t, uint32_t, uint64_t
 from libc.string cimport memset
+cimport numpy as cnp
 from raysort._types cimport rs_maxf, rs_minf, RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX, RS_RAY_TMAX
 
 import math
@@ -309,6 +312,27 @@ cdef extern from *:
     void scatter_pass "rs_keysort_scatter"(const uint64_t *src, uint64_t *dst, int32_t *out,
                                            int n, int shift, uint64_t dmask, int32_t *h,
                                            int32_t base, uint64_t low, int coherent) noexcept nogil
+
+
+# The avx512 build sorts packed keys (all different, so any correct sort gives the
+# stable order) with NumPy's own quicksort of uint64, which NumPy runs as its AVX-512
+# sort (x86-simd-sort) on a CPU that has AVX-512: 0.55-0.71x the radix sort's time, in
+# place after a trace (BENCHMARKS.md §10).  Its AVX2 sort took 1.2x, its scalar one 3x the
+# radix's time: the other builds keep the radix sort.  Reached through NumPy's C API
+# (the dtype's sort functions), so that each large packet's call costs no Python call.
+ctypedef int (*sort_fn)(void *start, cnp.npy_intp n, void *array) noexcept nogil
+cdef extern from "numpy/arrayobject.h":
+    ctypedef struct PyArray_ArrFuncs:
+        void *sort[3]               # indexed by NPY_SORTKIND
+    PyArray_ArrFuncs *PyDataType_GetArrFuncs(cnp.dtype descr)
+    enum: NPY_QUICKSORT
+cdef extern from "raysort/simd.h":
+    enum: RS_ISA_AVX512
+cnp.import_array()
+cdef sort_fn sort_u64 = <sort_fn> PyDataType_GetArrFuncs(np.dtype(np.uint64)).sort[NPY_QUICKSORT]
+cdef bint LIBRARY_SORT = RS_ISA_AVX512 and sort_u64 != NULL
+#: whether this build sorts packed keys with NumPy's sort (else: the radix sort)
+library_sort = LIBRARY_SORT
 
 
 cdef struct KeyInputs:
@@ -738,10 +762,8 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     """Sort rays [start, end), whose keys are keys[0, end - start), into
     order[start:end]; write sub-packet starts to offsets and return their number.
     Work buffers hold end - start (+1) items, ``count`` :data:`COUNT_SIZE` ints."""
-    cdef int i, j, c, nc = 0, pos, flip, low_bit, width, passes, buckets, shift1, shift2
-    cdef uint64_t mask, low, key, prev = 0, all_and, all_or, dmask
-    cdef uint64_t *sk
-    cdef int32_t *si
+    cdef int i, j, c, nc = 0, flip, low_bit, width, passes, buckets, shift1, shift2
+    cdef uint64_t mask, low, key, all_and, all_or, dmask
     cdef int32_t *h1
     cdef int32_t *h2
     # a chunk is every ray, or (compress) every run of equal keys in input order
@@ -753,17 +775,40 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     cdef int32_t *items = NULL if packed else citem
     mask = (~(<uint64_t> 0) << (64 - bits)) if bits < 64 else ~(<uint64_t> 0)
     low = ~mask
-    cdef bint simple
-    # the bits that differ between keys: only those are sorted on; and the runs of
-    # equal keys: compression pays only when they are long (the order is the same)
-    all_and, all_or = keys[0], keys[0]
-    c = 1
-    for i in range(1, n):
-        all_and &= keys[i]
-        all_or |= keys[i]
-        c += keys[i] != keys[i - 1]
+    cdef bint simple, library = LIBRARY_SORT and packed
+    if library:
+        # the runs of equal keys: compression pays only when they are long (the order
+        # is the same)
+        c = 1
+        if compress:
+            for i in range(1, n):
+                c += keys[i] != keys[i - 1]
+    else:
+        # also the bits that differ between keys: only those are sorted on
+        all_and, all_or = keys[0], keys[0]
+        c = 1
+        for i in range(1, n):
+            all_and &= keys[i]
+            all_or |= keys[i]
+            c += keys[i] != keys[i - 1]
     compress = compress and 2 * c <= n
     simple = packed and not compress
+    if library:
+        # the packed keys are all different: NumPy's sort of them is the stable sort
+        if simple:
+            for i in range(n):
+                ckey[i] = (keys[i] & mask) | <uint64_t> i
+            nc = n
+        else:
+            nc = make_chunks(keys, start, end, compress, True, mask, ckey, citem, cstart)
+        sort_u64(ckey, nc, NULL)
+        if simple:
+            for i in range(n):
+                order[start + i] = start + <int32_t> (ckey[i] & low)
+            return cut_packets(ckey, n, start, packet_size, split_bits, split_bits <= bits,
+                               offsets)
+        return finish_packet(ckey, citem, nc, n, start, compress, packed, low, cstart,
+                             packet_size, split_bits, split_bits <= bits, order, offsets, skey)
     digit_plan((all_and ^ all_or) & mask, n, 0 if packed else 64 - bits, &low_bit, &width,
                &passes)
     buckets = 1 << width
@@ -774,8 +819,8 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     shift1 = min(low_bit + width, 63)       # (a shift by 64 would be undefined)
     shift2 = min(low_bit + 2 * width, 63)
     h1, h2 = count + buckets, count + 2 * buckets
-    # chunks and the radix sort's histograms, in one pass (keys may be ckey itself:
-    # chunk nc <= ray i is written after ray i is read)
+    # chunks and the radix sort's histograms (keys may be ckey itself: chunk nc <= ray
+    # i is written after ray i is read)
     if simple:                      # the common case, in one tight loop
         if passes <= 3:
             for i in range(n):
@@ -792,18 +837,7 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
                     count[j * buckets + ((key >> (low_bit + j * width)) & dmask)] += 1
         nc = n
     else:
-        for i in range(n):
-            key = keys[i]
-            if not compress or i == 0 or key != prev:
-                if packed:
-                    ckey[nc] = (key & mask) | <uint64_t> nc
-                else:
-                    ckey[nc] = key
-                    citem[nc] = nc
-                cstart[nc] = start + i
-                nc += 1
-            prev = key
-        cstart[nc] = end
+        nc = make_chunks(keys, start, end, compress, packed, mask, ckey, citem, cstart)
         for i in range(nc):
             key = ckey[i]
             count[(key >> low_bit) & dmask] += 1
@@ -814,8 +848,46 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     # (a packed sort writes the order in its last pass)
     flip = radix_sort(ckey, items, ckey_tmp, citem_tmp, nc, low_bit, width, passes, count,
                       order + start if simple else NULL, start, low)
-    sk = ckey_tmp if flip else ckey
-    si = citem_tmp if flip else citem
+    if simple:
+        return cut_packets(ckey_tmp if flip else ckey, n, start, packet_size, split_bits,
+                           split_bits <= bits, offsets)
+    return finish_packet(ckey_tmp if flip else ckey, citem_tmp if flip else citem, nc, n,
+                         start, compress, packed, low, cstart, packet_size, split_bits,
+                         split_bits <= bits, order, offsets, skey)
+
+
+cdef int make_chunks(const uint64_t *keys, int start, int end, bint compress, bint packed,
+                     uint64_t mask, uint64_t *ckey, int32_t *citem,
+                     int32_t *cstart) noexcept nogil:
+    """The chunks of rays [start, end) (keys[0, end - start)) to sort: every ray, or
+    (compress) every run of equal keys in input order.  Writes each chunk's key (packed:
+    with its index in the low bits, else the index to citem) and its first ray to
+    cstart (and the end after the last); returns their number.  keys may be ckey:
+    chunk nc <= ray i is written after ray i is read."""
+    cdef int i, nc = 0
+    cdef uint64_t key, prev = 0
+    for i in range(end - start):
+        key = keys[i]
+        if not compress or i == 0 or key != prev:
+            if packed:
+                ckey[nc] = (key & mask) | <uint64_t> nc
+            else:
+                ckey[nc] = key
+                citem[nc] = nc
+            cstart[nc] = start + i
+            nc += 1
+        prev = key
+    cstart[nc] = end
+    return nc
+
+
+cdef int finish_packet(const uint64_t *sk, const int32_t *si, int nc, int n, int start,
+                       bint compress, bint packed, uint64_t low, const int32_t *cstart,
+                       int packet_size, int split_bits, bint grouped, int32_t *order,
+                       int32_t *offsets, uint64_t *skey) noexcept nogil:
+    """The order of rays [start, start + n) from their nc sorted chunks (keys ``sk``,
+    and with unpacked keys, indices ``si``), then :func:`cut_packets`."""
+    cdef int i, j, c, pos
     if compress:
         # decompress: each chunk's rays, in input order, at the chunk's sorted place
         pos = start
@@ -826,10 +898,10 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
                 skey[pos - start] = sk[j]
                 pos += 1
         sk = skey
-    elif not simple:
+    else:
         for j in range(nc):
             order[start + j] = start + si[j]
-    return cut_packets(sk, n, start, packet_size, split_bits, split_bits <= bits, offsets)
+    return cut_packets(sk, n, start, packet_size, split_bits, grouped, offsets)
 
 
 cdef int cut_packets(const uint64_t *sk, int n, int start, int packet_size, int split_bits,

@@ -9,7 +9,7 @@ per axis).  Per large packet the rays are then
 
 1. compressed: each run of consecutive rays with equal hash becomes one chunk
    (camera rays in tile order and the bounce rays of one surface come in runs);
-2. sorted: the chunks by hash (a stable radix sort on the hash's varying bits);
+2. sorted: the chunks by hash (a stable sort, see :mod:`raysort.sorters._keysort`);
 3. decompressed: each chunk's rays, in input order, go to its sorted place.
 
 The result is a stable sort of the rays by hash; a large packet whose runs are

@@ -24,7 +24,7 @@ direction_first   ``lead`` levels of the direction (u v), then the      COSTA
 ``interleaved`` with ``lead=0`` is the plain 6-D origin-direction Morton code of
 the outside example plugin ``raysort-morton`` (up to the order of the six
 coordinates within a level).  Rays are sorted by the key's top ``bits`` bits within
-each large packet (radix sort, linear), then cut into sub-packets.
+each large packet (see :mod:`raysort.sorters._keysort`), then cut into sub-packets.
 """
 from __future__ import annotations
 

@@ -27,6 +27,15 @@ must be bit-identical.
     cp raysort/_isa/avx512/traversals/stream.cpython-*.so /tmp/old-stream.so
     python tests/benchmarks/kernel_ab.py traversals.stream /tmp/old-stream.so sponza \
         --rays camera --size 256 --rounds 9
+
+``--sorter`` and ``--traversal`` choose the pipeline's plugins for ``--rays``; with
+``--function`` it then also prints that function's median time per call (so a sorter's
+kernel is timed where a render calls it: after a trace, with the cache as the trace left it):
+
+    cp raysort/_isa/avx512/sorters/_keysort.cpython-*.so /tmp/old-keysort.so
+    python tests/benchmarks/kernel_ab.py sorters._keysort /tmp/old-keysort.so sibenik \
+        --rays diffuse --size 256 --rounds 21 --calls 3 --sorter two_point \
+        --traversal stream --function sort_rays
 """
 import argparse
 import importlib.machinery
@@ -90,23 +99,29 @@ def trace_rounds(args, builds):
     else:
         work = workload(scene, "diffuse:depth=1", width=args.size, height=args.size, spp=1,
                         seed=1)
-    pipe = raysort.Pipeline(scene, threads=1, check_plugins=False)
+    pipe = raysort.Pipeline(scene, threads=1, check_plugins=False, sorter=args.sorter,
+                            traversal=args.traversal)
     args.spp = 1
     print_header(args, pipe)
     print(f"module {args.module}: old {args.old}, new {builds['new'].module.__file__}")
     print(f"{len(work.rays)} {args.rays} rays through Pipeline.trace, {args.calls} calls per "
           f"build and round (median), {args.rounds} rounds after a warm-up")
     times, first, same = {"old": [], "new": []}, None, True
+    function = {"old": [], "new": []}
     for r in range(args.rounds + 1):
         for key in (("old", "new") if r % 2 == 0 else ("new", "old")):
-            isa._modules[args.module] = builds[key].module
-            calls = []
+            build = builds[key]
+            isa._modules[args.module] = build
+            calls, inner = [], []
             for _ in range(args.calls):
+                before = build.seconds
                 start = time.thread_time()
                 hits, _ = pipe.trace(work.rays, work.packets)
                 calls.append(time.thread_time() - start)
+                inner.append(build.seconds - before)
             if r:
                 times[key].append(statistics.median(calls))
+                function[key].append(statistics.median(inner))
             if first is None:
                 first = (hits.t.copy(), hits.prim.copy())
             same = same and np.array_equal(hits.t, first[0]) and np.array_equal(hits.prim,
@@ -119,6 +134,12 @@ def trace_rounds(args, builds):
         print(f"  {key}: {spread(rates)} Mrays/s")
     print(f"  speed-up new / old per round: "
           f"{spread([o / w for o, w in zip(times['old'], times['new'])])}")
+    if args.function:
+        for key in ("old", "new"):
+            print(f"  {key} {args.function}: {spread([t * 1e3 for t in function[key]])} ms "
+                  f"per call")
+        print(f"  {args.function} new / old per round: "
+              f"{spread([w / o for o, w in zip(function['old'], function['new'])])}")
     return 0 if same else 1
 
 
@@ -137,6 +158,9 @@ def main(argv=None):
                         help="trace these rays of the image instead of rendering frames")
     parser.add_argument("--calls", type=int, default=10,
                         help="with --rays: calls per build and round (10)")
+    parser.add_argument("--sorter", default="none", help="with --rays: the sorter (none)")
+    parser.add_argument("--traversal", default=None,
+                        help="with --rays: the traversal (the pipeline's default)")
     args = parser.parse_args(argv)
     builds = {"old": TimedModule(load_copy(args.module, args.old), args.function),
               "new": TimedModule(isa.module(args.module), args.function)}

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import raysort
+from raysort import isa
 from raysort.errors import ConfigError
 from raysort.rays import RayBatch
 from raysort.sorters import _keysort
@@ -225,23 +226,31 @@ def reference_offsets(keys_sorted, packets, packet_size, split_bits):
 @pytest.mark.parametrize("compress", [False, True])
 @pytest.mark.parametrize("digits,packet_size,split_bits", [(1, 64, 0), (3, 7, 5), (8, 4096, 0),
                                                            (4, 64, 12), (1, 16, 20)])
-def test_sort_keys_is_a_stable_sort(rng, compress, digits, packet_size, split_bits):
-    """(The last case splits on more bits than it sorts: runs of the same top bits are
-    then not contiguous, and every change of them cuts.)"""
+def test_sort_keys_is_a_stable_sort(rng, each_isa, compress, digits, packet_size, split_bits):
+    """On every ISA (the avx512 build sorts packed keys with NumPy's sort, the others
+    with the radix sort).  (The last case splits on more bits than it sorts: runs of
+    the same top bits are then not contiguous, and every change of them cuts.)"""
     n = 3000
     packets = np.array([0, 0, 5, 1029, 1029, 2500, 3000], np.int32)
     keys = rng.integers(0, 2**63, size=n, dtype=np.uint64) << np.uint64(1)
     keys[rng.random(n) < 0.4] = np.uint64(7) << np.uint64(60)   # long runs of one key
     keys[1000:1400] = keys[1000]
-    order, offsets = _keysort.sort_keys(keys, packets, digits, compress=compress,
-                                        packet_size=packet_size, split_bits=split_bits)
+    order, offsets = isa.module("sorters._keysort").sort_keys(
+        keys, packets, digits, compress=compress, packet_size=packet_size,
+        split_bits=split_bits)
     assert np.array_equal(order, reference_order(keys, packets, digits))
     assert np.array_equal(offsets, reference_offsets(keys[order], packets, packet_size,
                                                      split_bits))
 
 
+def test_which_builds_sort_with_numpy(each_isa):
+    """The avx512 builds sort packed keys with NumPy's sort, the others with the radix
+    sort (the tests of sort_keys run on every ISA, so both are held to the reference)."""
+    assert isa.module("sorters._keysort").library_sort == (each_isa in ("avx512", "avx512emu"))
+
+
 @pytest.mark.parametrize("share", [0.6, 0.97])
-def test_sort_keys_where_most_keys_share_digits(rng, share):
+def test_sort_keys_where_most_keys_share_digits(rng, each_isa, share):
     """Coherent rays: most keys of a large packet share every digit (the sort then
     counts in a copy of its counters, see rs_keysort_scatter); still the stable sort."""
     n = 4096
@@ -249,8 +258,8 @@ def test_sort_keys_where_most_keys_share_digits(rng, share):
     keys = rng.integers(0, 2**63, size=n, dtype=np.uint64) << np.uint64(1)
     keys[rng.random(n) < share] = np.uint64(0x5A3C_9600_0000_0000)
     for digits in (1, 3):
-        order, offsets = _keysort.sort_keys(keys, packets, digits, packet_size=64,
-                                            split_bits=3)
+        order, offsets = isa.module("sorters._keysort").sort_keys(
+            keys, packets, digits, packet_size=64, split_bits=3)
         assert np.array_equal(order, reference_order(keys, packets, digits))
         assert np.array_equal(offsets, reference_offsets(keys[order], packets, 64, 3))
 
@@ -279,7 +288,7 @@ def test_digit_plan_covers_the_varying_bits(n, rng):
 @pytest.mark.parametrize("compress", [False, True])
 @pytest.mark.parametrize("varying", [(0, 0), (40, 41), (40, 52), (56, 64), (30, 64), (0, 64)],
                          ids=["equal", "one-bit", "middle", "top-byte", "top-34", "all"])
-def test_sort_keys_sorts_only_the_varying_bits(rng, compress, varying):
+def test_sort_keys_sorts_only_the_varying_bits(rng, each_isa, compress, varying):
     """Keys whose bits vary only in [lo, hi) (the rest the same in every key): the sort
     skips the constant digits and still gives the stable order of the whole keys."""
     lo, hi = varying
@@ -293,8 +302,8 @@ def test_sort_keys_sorts_only_the_varying_bits(rng, compress, varying):
     # packed (the index rides in the low bits), 64-bit keys, and a split below the
     # sorted bits (the key is not packed: its bits below the sorted ones are not sorted on)
     for digits, split_bits in ((3, 0), (8, 0), (2, 40)):
-        order, offsets = _keysort.sort_keys(keys, packets, digits, compress=compress,
-                                            packet_size=64, split_bits=split_bits)
+        order, offsets = isa.module("sorters._keysort").sort_keys(
+            keys, packets, digits, compress=compress, packet_size=64, split_bits=split_bits)
         assert np.array_equal(order, reference_order(keys, packets, digits)), digits
 
 
@@ -358,15 +367,16 @@ def test_octant_prefix(name, rng):
     assert not np.array_equal(order, plain)
 
 
-def test_garanzha_compression_gives_the_plain_sort(rng):
+def test_garanzha_compression_gives_the_plain_sort(rng, each_isa):
     rays = random_rays(rng, 2000, BOX)
     rays.data[:, 100:600] = rays.data[:, 100:101]            # a long run of one ray
     sorter = GaranzhaSorter(split=True)
     keys = sorter.keys(rays, BOX)
     packets = np.array([0, 1024, 2000], np.int32)
     order, offsets = sorter.sort(rays, packets, BOX)
-    plain = _keysort.sort_keys(keys, packets, sorter._digits, compress=False,
-                               packet_size=64, split_bits=sorter.split_bits)
+    plain = isa.module("sorters._keysort").sort_keys(
+        keys, packets, sorter._digits, compress=False, packet_size=64,
+        split_bits=sorter.split_bits)
     assert np.array_equal(order, plain[0]) and np.array_equal(offsets, plain[1])
     ks = keys[order]
     assert all(len(set(ks[a:b].tolist())) == 1 for a, b in zip(offsets[:-1], offsets[1:])), \
@@ -431,8 +441,6 @@ def test_bounce_rays_carry_the_previous_hit_distance(sibenik):
 @pytest.mark.parametrize("name", KEY_SORTERS)
 def test_same_order_on_every_isa(name, rng):
     """The key kernel is built per ISA; every build gives the same keys and order."""
-    from raysort import isa
-
     rays = inside_rays(rng, 3000)
     rays.prev_t = rng.uniform(0, 3, len(rays)).astype(np.float32)
     rays.prev_t[::7] = np.nan
