@@ -264,6 +264,28 @@ def test_sort_keys_where_most_keys_share_digits(rng, each_isa, share):
         assert np.array_equal(offsets, reference_offsets(keys[order], packets, 64, 3))
 
 
+@pytest.mark.parametrize("split_bits", [0, 3, 5, 10, 16, 24])
+@pytest.mark.parametrize("sizes", [(1, 5, 1024), (4096, 2000), (300, 3000, 700)])
+def test_sort_keys_with_runs_of_varying_bits(rng, each_isa, split_bits, sizes):
+    """Keys whose varying bits form runs with constant bits between them, as a
+    bounce's keys do (the avx512 build then sorts 32-bit keys made of the varying
+    runs, keeping the smallest gaps while they fit, and cuts on their top bits;
+    4096-ray packets do not fit and take the 64-bit sort); split_bits ends above,
+    inside and below runs and gaps."""
+    runs = [(61, 64), (50, 56), (47, 48), (40, 45)]      # [lo, hi): 3 + 6 + 1 + 5 bits
+    n = sum(sizes)
+    packets = np.cumsum([0, *sizes]).astype(np.int32)
+    keys = np.full(n, 0x9C00_0000_0000_0000 & ~sum(((1 << (hi - lo)) - 1) << lo
+                                                    for lo, hi in runs), np.uint64)
+    for lo, hi in runs:
+        keys |= rng.integers(0, 1 << (hi - lo), size=n, dtype=np.uint64) << np.uint64(lo)
+    keys[rng.random(n) < 0.2] = keys[0]                     # ties
+    order, offsets = isa.module("sorters._keysort").sort_keys(
+        keys, packets, 3, packet_size=64, split_bits=split_bits)
+    assert np.array_equal(order, reference_order(keys, packets, 3))
+    assert np.array_equal(offsets, reference_offsets(keys[order], packets, 64, split_bits))
+
+
 @pytest.mark.parametrize("n", [1, 5, 300, 1024, 4096])
 def test_digit_plan_covers_the_varying_bits(n, rng):
     """The radix digits span every bit from the highest to the lowest varying one, are
