@@ -80,6 +80,16 @@ RS_EMU rs_emu_m512 rs_emu_load_ps(const void *p)
         __builtin_trap();
     return rs_emu_loadu_ps(p);
 }
+/* VCVTTPS2DQ: truncation toward zero; NaN and values out of int32 range give INT32_MIN */
+RS_EMU rs_emu_m512i rs_emu_cvttps_epi32(rs_emu_m512 a)
+{
+    rs_emu_m512i r;
+    for (int j = 0; j < 16; ++j) {
+        float x = a.f[j];
+        r.i[j] = (x > -2147483904.0f && x < 2147483648.0f) ? (int32_t)x : INT32_MIN;
+    }
+    return r;
+}
 RS_EMU void rs_emu_storeu_ps(void *p, rs_emu_m512 a) { memcpy(p, a.f, sizeof a.f); }
 RS_EMU void rs_emu_storeu_si512(void *p, rs_emu_m512i a) { memcpy(p, a.i, sizeof a.i); }
 RS_EMU rs_emu_m512i rs_emu_castps_si512(rs_emu_m512 a)
@@ -225,6 +235,7 @@ RS_EMU rs_emu_m512 rs_emu_broadcast_f32x8(__m256 a)
 #define _mm512_mask_blend_epi32 rs_emu_mask_blend_epi32
 #define _mm512_add_epi32 rs_emu_add_epi32
 #define _mm512_mullo_epi32 rs_emu_mullo_epi32
+#define _mm512_cvttps_epi32 rs_emu_cvttps_epi32
 #define _mm512_maskz_compress_epi32 rs_emu_maskz_compress_epi32
 #define _mm512_i32gather_ps rs_emu_i32gather_ps
 #define _mm512_extractf32x8_ps rs_emu_extractf32x8_ps
