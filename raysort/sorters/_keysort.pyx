@@ -28,8 +28,8 @@ chunk order (the result is the same order; the work is on fewer items when the
 input has long runs, so it is skipped for a packet with more than half as many
 runs as rays).  Whenever the key's low bits, below the sorted ones, have room
 for it, the ray's (or chunk's) index rides there: the packed keys are then all
-different, and the avx512 build sorts them with NumPy's quicksort (see
-``sort_u64`` below).  Every other case is a stable LSD radix sort on the bits
+different, and the avx2 and avx512 builds sort them with NumPy's quicksort (see
+``sort_u32`` and ``sort_u64`` below).  Every other case is a stable LSD radix sort on the bits
 from the highest to the lowest one that differ between the packet's keys, in
 digits of 8 to :data:`MAX_DIGIT_BITS` bits (:func:`digit_plan`; a pass whose
 digit is the same for every key is skipped).  The sorted run is then cut into
@@ -344,12 +344,16 @@ cdef extern from *:
                                            int32_t base, uint64_t low, int coherent) noexcept nogil
 
 
-# The avx512 build sorts packed keys (all different, so any correct sort gives the
-# stable order) with NumPy's own quicksort of uint64, which NumPy runs as its AVX-512
-# sort (x86-simd-sort) on a CPU that has AVX-512: 0.55-0.71x the radix sort's time, in
-# place after a trace (BENCHMARKS.md §10).  Its AVX2 sort took 1.2x, its scalar one 3x the
-# radix's time: the other builds keep the radix sort.  Reached through NumPy's C API
-# (the dtype's sort functions), so that each large packet's call costs no Python call.
+# Packed keys are all different, so any correct sort of them gives the stable order.
+# The avx2 and avx512 builds sort them with NumPy's own quicksort, which NumPy runs as
+# its AVX2 or AVX-512 sort (x86-simd-sort) on a CPU that has them: as 32-bit compact
+# keys (sort_compact) where the varying bits and the index fit, which took 0.44-0.65x
+# the radix sort's time in place after a trace with AVX-512 and 0.58x with NumPy's
+# AVX2 sort; and, in the avx512 build only, as 64-bit keys where they do not (NumPy's
+# AVX2 sort of 64-bit keys took 1.2x the radix's time).  NumPy's scalar sort took 3x:
+# the sse2 and scalar builds, for CPUs without AVX2, keep the radix sort (BENCHMARKS.md
+# §10).  Reached through NumPy's C API (the dtype's sort functions), so that each large
+# packet's call costs no Python call.
 ctypedef int (*sort_fn)(void *start, cnp.npy_intp n, void *array) noexcept nogil
 cdef extern from "numpy/arrayobject.h":
     ctypedef struct PyArray_ArrFuncs:
@@ -357,12 +361,15 @@ cdef extern from "numpy/arrayobject.h":
     PyArray_ArrFuncs *PyDataType_GetArrFuncs(cnp.dtype descr)
     enum: NPY_QUICKSORT
 cdef extern from "raysort/simd.h":
-    enum: RS_ISA_AVX512
+    enum: RS_ISA_AVX2, RS_ISA_AVX512
 cnp.import_array()
 cdef sort_fn sort_u64 = <sort_fn> PyDataType_GetArrFuncs(np.dtype(np.uint64)).sort[NPY_QUICKSORT]
 cdef sort_fn sort_u32 = <sort_fn> PyDataType_GetArrFuncs(np.dtype(np.uint32)).sort[NPY_QUICKSORT]
-cdef bint LIBRARY_SORT = RS_ISA_AVX512 and sort_u64 != NULL and sort_u32 != NULL
-#: whether this build sorts packed keys with NumPy's sort (else: the radix sort)
+cdef bint COMPACT_SORT = RS_ISA_AVX2 and sort_u32 != NULL
+cdef bint LIBRARY_SORT = RS_ISA_AVX512 and sort_u64 != NULL
+#: whether this build sorts 32-bit compact keys with NumPy's sort, where they fit
+compact_sort = COMPACT_SORT
+#: whether this build sorts the other packed keys with NumPy's sort (else: the radix sort)
 library_sort = LIBRARY_SORT
 
 
@@ -815,13 +822,14 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
         c += keys[i] != keys[i - 1]
     compress = compress and 2 * c <= n
     simple = packed and not compress
+    if simple and COMPACT_SORT:
+        c = sort_compact(keys, n, start, (all_and ^ all_or) & mask, split_bits,
+                         packet_size, order, offsets, <uint32_t *> citem)
+        if c >= 0:
+            return c
     if library:
         # the packed keys are all different: NumPy's sort of them is the stable sort
         if simple:
-            c = sort_compact(keys, n, start, (all_and ^ all_or) & mask, split_bits,
-                             packet_size, order, offsets, <uint32_t *> citem)
-            if c >= 0:
-                return c
             for i in range(n):
                 ckey[i] = (keys[i] & mask) | <uint64_t> i
             nc = n

@@ -227,8 +227,8 @@ def reference_offsets(keys_sorted, packets, packet_size, split_bits):
 @pytest.mark.parametrize("digits,packet_size,split_bits", [(1, 64, 0), (3, 7, 5), (8, 4096, 0),
                                                            (4, 64, 12), (1, 16, 20)])
 def test_sort_keys_is_a_stable_sort(rng, each_isa, compress, digits, packet_size, split_bits):
-    """On every ISA (the avx512 build sorts packed keys with NumPy's sort, the others
-    with the radix sort).  (The last case splits on more bits than it sorts: runs of
+    """On every ISA (NumPy's sort or the radix sort, see
+    test_which_builds_sort_with_numpy).  (The last case splits on more bits than it sorts: runs of
     the same top bits are then not contiguous, and every change of them cuts.)"""
     n = 3000
     packets = np.array([0, 0, 5, 1029, 1029, 2500, 3000], np.int32)
@@ -244,9 +244,12 @@ def test_sort_keys_is_a_stable_sort(rng, each_isa, compress, digits, packet_size
 
 
 def test_which_builds_sort_with_numpy(each_isa):
-    """The avx512 builds sort packed keys with NumPy's sort, the others with the radix
-    sort (the tests of sort_keys run on every ISA, so both are held to the reference)."""
-    assert isa.module("sorters._keysort").library_sort == (each_isa in ("avx512", "avx512emu"))
+    """The avx2 and avx512 builds sort 32-bit compact keys with NumPy's sort, the
+    avx512 builds also 64-bit packed keys; the rest is the radix sort (the tests of
+    sort_keys run on every ISA, so each path is held to the reference)."""
+    module = isa.module("sorters._keysort")
+    assert module.compact_sort == (each_isa in ("avx2", "avx512", "avx512emu"))
+    assert module.library_sort == (each_isa in ("avx512", "avx512emu"))
 
 
 @pytest.mark.parametrize("share", [0.6, 0.97])
@@ -268,8 +271,8 @@ def test_sort_keys_where_most_keys_share_digits(rng, each_isa, share):
 @pytest.mark.parametrize("sizes", [(1, 5, 1024), (4096, 2000), (300, 3000, 700)])
 def test_sort_keys_with_runs_of_varying_bits(rng, each_isa, split_bits, sizes):
     """Keys whose varying bits form runs with constant bits between them, as a
-    bounce's keys do (the avx512 build then sorts 32-bit keys made of the varying
-    runs, keeping the smallest gaps while they fit, and cuts on their top bits;
+    bounce's keys do (the avx2 and avx512 builds then sort 32-bit keys made of the
+    varying runs, keeping the smallest gaps while they fit, and cuts on their top bits;
     4096-ray packets do not fit and take the 64-bit sort); split_bits ends above,
     inside and below runs and gaps."""
     runs = [(61, 64), (50, 56), (47, 48), (40, 45)]      # [lo, hi): 3 + 6 + 1 + 5 bits
