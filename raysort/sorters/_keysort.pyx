@@ -348,7 +348,7 @@ cdef extern from *:
 # The avx2 and avx512 builds sort them with NumPy's own quicksort, which NumPy runs as
 # its AVX2 or AVX-512 sort (x86-simd-sort) on a CPU that has them: as 32-bit compact
 # keys (sort_compact) where the varying bits and the index fit, which took 0.44-0.65x
-# the radix sort's time in place after a trace with AVX-512 and 0.58x with NumPy's
+# the radix sort's time in place after a trace with AVX-512 and 0.64-0.74x with NumPy's
 # AVX2 sort; and, in the avx512 build only, as 64-bit keys where they do not (NumPy's
 # AVX2 sort of 64-bit keys took 1.2x the radix's time).  NumPy's scalar sort took 3x:
 # the sse2 and scalar builds, for CPUs without AVX2, keep the radix sort (BENCHMARKS.md
