@@ -240,6 +240,21 @@ cdef inline void keep_lanes(const void *src, int n, uint64_t keep, void *dst,
     memcpy(dst, stage, count * sizeof(int32_t))
 
 
+cdef inline void write_ray(const HitBlock *b, int h, float w0, float w1, float w2, float tmax,
+                           float[:, ::1] out, int k) noexcept nogil:
+    """Write one new ray, from lane ``h``'s point ``o`` along ``(w0, w1, w2)`` over
+    ``(0, tmax)``, as ray ``k`` of a batch's rows (:func:`write_rays` for one lane with a
+    direction and tmax of its own: a lane's rays toward several lights)."""
+    cdef int a
+    for a in range(3):
+        out[RS_RAY_OX + a, k] = b.o[a][h]
+    out[RS_RAY_DX, k] = w0
+    out[RS_RAY_DX + 1, k] = w1
+    out[RS_RAY_DX + 2, k] = w2
+    out[RS_RAY_TMIN, k] = 0.0
+    out[RS_RAY_TMAX, k] = tmax
+
+
 cdef inline void write_rays(const HitBlock *b, uint64_t keep, int count,
                             float[:, ::1] out, int k, int step) noexcept nogil:
     """Write the new rays (``o``, ``w``, 0, ``tmax``) of the ``count`` lanes set in

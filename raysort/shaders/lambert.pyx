@@ -4,13 +4,13 @@ from libc.string cimport memcpy, memmove
 from libc.stdint cimport int32_t, uint32_t, uint64_t
 from raysort._checks cimport parents_weights_bad, slots_bad
 from raysort._rng cimport seed_key, uniform_at
-from raysort._types cimport (RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX, RS_RAY_TMIN, RS_RAY_TMAX,
+from raysort._types cimport (RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX,
                              RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH, rs_prefetch,
                              rs_prefetchw)
 from raysort.shaders._shading cimport (LANES, RS_SW, HitBlock, checked_hits, consecutive,
                                        take_rays, take_keys, rs_mask64, rs_list_valid,
                                        rs_record_columns, leave_surfaces, cosine_directions,
-                                       keep_lanes, write_rays)
+                                       keep_lanes, write_ray, write_rays)
 
 import numpy as np
 
@@ -200,13 +200,7 @@ cdef int light_hits(const HitBlock *b, float reflect[3][LANES], const int32_t *h
             if not toward_light(b, h, light_pos[L, 0], light_pos[L, 1], light_pos[L, 2],
                                 &w0, &w1, &w2, &dist, &weight):
                 continue
-            for c in range(3):
-                sh_rays[RS_RAY_OX + c, m] = b.o[c][h]
-            sh_rays[RS_RAY_DX, m] = w0
-            sh_rays[RS_RAY_DX + 1, m] = w1
-            sh_rays[RS_RAY_DX + 2, m] = w2
-            sh_rays[RS_RAY_TMIN, m] = 0.0
-            sh_rays[RS_RAY_TMAX, m] = dist
+            write_ray(b, h, w0, w1, w2, dist, sh_rays, m)
             for c in range(3):
                 sh_contrib[c, m] = reflect[c][h] * light_int[L, c] * weight
             sh_parent[m] = b.ray[h]
