@@ -749,7 +749,7 @@ cdef int collapse_nodes(const rs_node *nodes, int n_nodes, rs_node4 *out,
     return n_out
 
 
-def collapse(unsigned char[::1] node_bytes, unsigned char[::1] out_bytes):
+def collapse(const unsigned char[::1] node_bytes, unsigned char[::1] out_bytes):
     """Collapse binary nodes into 4-wide nodes; returns (count, depth)."""
     cdef int n_nodes = node_bytes.shape[0] // sizeof(rs_node), n_out, depth = 0
     with nogil:
@@ -984,7 +984,7 @@ cdef int collapse8_nodes(const rs_node *nodes, int n_nodes, const rs_tri *tris,
     return n_out
 
 
-def collapse8(unsigned char[::1] node_bytes, unsigned char[::1] tri_bytes,
+def collapse8(const unsigned char[::1] node_bytes, const unsigned char[::1] tri_bytes,
               unsigned char[::1] out_bytes, unsigned char[::1] group_bytes,
               double node_cost, double group_cost, int max_leaf):
     """Collapse binary nodes into 8-wide nodes and SoA leaf groups;

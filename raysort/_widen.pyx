@@ -126,7 +126,7 @@ cdef int widen_nodes(const rs_node8 *nodes8, int n8, rs_node16 *out, int *depth)
     return n_out
 
 
-def widen16(unsigned char[::1] node8_bytes, unsigned char[::1] out_bytes):
+def widen16(const unsigned char[::1] node8_bytes, unsigned char[::1] out_bytes):
     """Widen 8-wide nodes into 16-wide ones; returns (nodes written, depth)."""
     cdef int n8 = node8_bytes.shape[0] // sizeof(rs_node8), n_out, depth = 0
     if n8 == 0 or out_bytes.shape[0] < n8 * sizeof(rs_node16):

@@ -7,6 +7,11 @@ exposed as the NumPy structured dtype :data:`NODE_DTYPE` (the C struct
 :data:`TRI_DTYPE` records (``v0``, edges ``e1``/``e2`` and the input index
 ``id``), ready for Moller-Trumbore; with spatial splits a triangle may be
 stored in several leaves.
+
+Every kernel trusts these arrays (child indices, triangle offsets, the depth that
+sizes its stack), so a BVH's arrays are read-only, in memory NumPy will not make
+writeable again (:func:`frozen`), and its tree attributes cannot be assigned: a
+script reads them, and a changed tree is a new BVH (or :meth:`BVH.refit`).
 """
 from __future__ import annotations
 
@@ -25,7 +30,8 @@ from raysort.params import integer, number
 from raysort.rays import aligned_empty
 
 __all__ = ["BVH", "Wide8", "Wide16", "PRESETS", "NODE_DTYPE", "NODE4_DTYPE", "NODE8_DTYPE",
-           "NODE16_DTYPE", "TRI_DTYPE", "TRI8_DTYPE", "prepare_triangles", "degenerate_faces"]
+           "NODE16_DTYPE", "TRI_DTYPE", "TRI8_DTYPE", "prepare_triangles", "degenerate_faces",
+           "frozen"]
 
 #: named sets of build parameters (``BVH(..., preset="manta")``, ``bvh={"preset": "manta"}``,
 #: ``raysort bench --bvh manta``); parameters given next to a preset override it.
@@ -63,6 +69,17 @@ class Wide16(NamedTuple):
     groups: np.ndarray      #: the 8-wide tree's TRI8_DTYPE groups (the same array)
     depth: int              #: levels of 16-wide nodes
     build_seconds: float    #: time the widening took (after the 8-wide collapse)
+
+
+def frozen(array, align=64):
+    """A read-only copy of ``array``, C-contiguous with its data ``align``-aligned,
+    whose flag NumPy refuses to set writeable again (its base is a read-only
+    memoryview): what the kernels read cannot be edited in place."""
+    array = np.asarray(array)
+    out = aligned_empty(array.shape, array.dtype, align)
+    out[...] = array
+    view = memoryview(out.reshape(-1).view(np.uint8)).toreadonly()
+    return np.frombuffer(view, dtype=array.dtype).reshape(array.shape)
 
 
 def prepare_triangles(vertices, faces):
@@ -119,6 +136,8 @@ class BVH:
 
     Attributes
     ----------
+    (The tree's arrays are read-only and these attributes cannot be assigned; see
+    the module docstring.)
     nodes : NODE_DTYPE array, depth first (root first)
     triangles : TRI_DTYPE array in BVH order
     order : int32 array, ``triangles[p]`` is input triangle ``order[p]`` (each
@@ -161,16 +180,15 @@ class BVH:
         nodes = np.zeros(max(2 * capacity, 1), dtype=NODE_DTYPE)
         order = np.zeros(max(capacity, 1), dtype=np.int32)
         triangles = np.zeros(max(capacity, 1), dtype=TRI_DTYPE)
-        n_nodes, n_refs, self.depth = _bvh.build(
+        n_nodes, n_refs, self._depth = _bvh.build(
             vertices, faces, self.max_leaf, self.bins, self.traversal_cost, capacity,
             self.split_alpha, nodes.view(np.uint8).reshape(-1), order,
             triangles.view(np.uint8).reshape(-1))
-        self.nodes = nodes[:n_nodes].copy()
-        self.order, self.triangles = ((order, triangles) if n_refs == len(order)
-                                      else (order[:n_refs].copy(), triangles[:n_refs].copy()))
+        self._nodes = frozen(nodes[:n_nodes])
+        self._order, self._triangles = frozen(order[:n_refs]), frozen(triangles[:n_refs])
         self.references = n_refs
         self.build_seconds = time.perf_counter() - start
-        self.vertices, self.faces = vertices, faces
+        self._vertices, self._faces = frozen(vertices), frozen(faces)
         self._update_bounds()
         self._wide = None
         self._wide8 = None
@@ -197,15 +215,32 @@ class BVH:
                                          MAX_SPATIAL_SPLITS),
                 "split_alpha": number("split_alpha", p["split_alpha"], 0, 1)}
 
+    # the tree, read only (see the module docstring)
+    nodes = property(lambda self: self._nodes, doc="NODE_DTYPE array, depth first (root first)")
+    triangles = property(lambda self: self._triangles, doc="TRI_DTYPE array in BVH order")
+    order = property(lambda self: self._order,
+                     doc="int32 array: ``triangles[p]`` is input triangle ``order[p]``")
+    depth = property(lambda self: self._depth, doc="number of levels")
+    bounds = property(lambda self: self._bounds, doc="float32 (2, 3), the root box")
+    vertices = property(lambda self: self._vertices,
+                        doc="the mesh's vertices (they move with :meth:`refit`)")
+    faces = property(lambda self: self._faces, doc="the mesh's faces")
+
     @property
     def wide(self):
         with self._wide_lock:
             if self._wide is None:
                 out = aligned_empty((len(self.nodes),), NODE4_DTYPE)
-                n, self.wide_depth = _bvh.collapse(self.nodes.view(np.uint8).reshape(-1),
-                                                   out.view(np.uint8).reshape(-1))
-                self._wide = out[:n]
+                n, self._wide_depth = _bvh.collapse(self.nodes.view(np.uint8).reshape(-1),
+                                                    out.view(np.uint8).reshape(-1))
+                self._wide = frozen(out[:n])
             return self._wide
+
+    @property
+    def wide_depth(self):
+        """Levels of the 4-wide tree (:attr:`wide`)."""
+        self.wide  # noqa: B018 (collapsed on first use)
+        return self._wide_depth
 
     @property
     def wide8(self):
@@ -224,7 +259,7 @@ class BVH:
                 nodes = aligned_empty((len(wide8.nodes),), NODE16_DTYPE, 64)
                 n, depth = _widen.widen16(wide8.nodes.view(np.uint8).reshape(-1),
                                           nodes.view(np.uint8).reshape(-1))
-                self._wide16 = Wide16(nodes[:n], wide8.groups, depth,
+                self._wide16 = Wide16(frozen(nodes[:n]), wide8.groups, depth,
                                       time.perf_counter() - start)
             return self._wide16
 
@@ -243,10 +278,12 @@ class BVH:
             self.nodes.view(np.uint8).reshape(-1), self.triangles.view(np.uint8).reshape(-1),
             nodes.view(np.uint8).reshape(-1), groups.view(np.uint8).reshape(-1),
             1.0, group_cost, max_leaf)
-        return Wide8(nodes[:n], groups[:n_groups], depth, sah, time.perf_counter() - start)
+        return Wide8(frozen(nodes[:n]), frozen(groups[:n_groups]), depth, sah,
+                     time.perf_counter() - start)
 
     def _update_bounds(self):
-        self.bounds = np.stack([self.nodes[0]["lo"], self.nodes[0]["hi"]]).astype(np.float32)
+        self._bounds = frozen(np.stack([self.nodes[0]["lo"], self.nodes[0]["hi"]])
+                              .astype(np.float32))
 
     def refit(self, vertices):
         """Move the triangles to new positions of the same vertices and refit the boxes.
@@ -256,9 +293,11 @@ class BVH:
         every hit stays exact, but the tree loses what the cuts gained; build a new
         BVH after large motions."""
         vertices, faces = check_mesh(vertices, self.faces)
-        self.vertices = vertices
-        _bvh.refit(vertices, faces, self.order, self.nodes.view(np.uint8).reshape(-1),
-                   self.triangles.view(np.uint8).reshape(-1))
+        nodes, triangles = self.nodes.copy(), self.triangles.copy()
+        _bvh.refit(vertices, faces, self.order, nodes.view(np.uint8).reshape(-1),
+                   triangles.view(np.uint8).reshape(-1))
+        self._vertices, self._nodes, self._triangles = (frozen(vertices), frozen(nodes),
+                                                        frozen(triangles))
         self._update_bounds()
         with self._wide_lock:
             self._wide = None       # collapsed again from the refitted boxes on use

@@ -410,3 +410,53 @@ def test_wide_follows_a_refit(sibenik):
     bvh.refit(sibenik.vertices * np.float32(2))
     _check_wide(bvh)
     assert not np.array_equal(bvh.wide["hi"], before["hi"])
+
+
+# -- the tree cannot be edited --------------------------------------------------------
+
+def _tree_arrays(bvh):
+    return {"nodes": bvh.nodes, "triangles": bvh.triangles, "order": bvh.order,
+            "bounds": bvh.bounds, "vertices": bvh.vertices, "faces": bvh.faces,
+            "wide": bvh.wide, "wide8.nodes": bvh.wide8.nodes, "wide8.groups": bvh.wide8.groups,
+            "wide16.nodes": bvh.wide16.nodes}
+
+
+@pytest.mark.parametrize("refitted", [False, True])
+def test_the_tree_cannot_be_edited(rng, refitted):
+    """The kernels trust a BVH's arrays (an edited child index or triangle offset made
+    them read out of bounds): every array is read-only, NumPy refuses to make it
+    writeable, and the tree's attributes cannot be assigned, also after a refit."""
+    vertices = rng.uniform(-1, 1, (90, 3)).astype(np.float32)
+    faces = np.arange(90, dtype=np.int32).reshape(30, 3)
+    bvh = BVH(vertices, faces)
+    if refitted:
+        bvh.refit(vertices * 2)
+    rays = random_rays(rng, 64, bvh.bounds)
+    for name, array in _tree_arrays(bvh).items():
+        assert not array.flags.writeable, name
+        with pytest.raises(ValueError):
+            array.flags.writeable = True
+        with pytest.raises(ValueError, match="read-only"):
+            array.view(np.uint8)[...] = 0
+    for name in ("nodes", "triangles", "order", "depth", "bounds", "vertices", "faces",
+                 "wide", "wide8", "wide16", "wide_depth"):
+        with pytest.raises(AttributeError):
+            setattr(bvh, name, getattr(bvh, name))
+    with pytest.raises(AttributeError):
+        bvh.wide8.nodes = bvh.wide8.nodes
+    # and the arrays the kernels read still give brute force's hits
+    for traversal in ("wide8", "stream", "ranged"):
+        order = np.arange(len(rays), dtype=np.int32)
+        offsets = np.arange(0, len(rays) + 1, 16, dtype=np.int32)
+        packets = gather(rays, order, offsets)
+        raysort.create("traversals", traversal).intersect(bvh, packets, any_hit=False)
+        assert_same_hits(scatter(packets, len(rays)),
+                         brute_force(bvh.vertices, bvh.faces, rays))
+
+
+def test_a_copy_of_an_array_is_the_callers():
+    """Reading is unchanged: a copy of a tree array is an ordinary writeable array."""
+    bvh = BVH(np.eye(3, dtype=np.float32), np.array([[0, 1, 2]], np.int32))
+    nodes = bvh.nodes.copy()
+    nodes["count"] = 0
+    assert bvh.nodes["count"][0] == 1
