@@ -28,13 +28,13 @@ chunk order (the result is the same order; the work is on fewer items when the
 input has long runs, so it is skipped for a packet with more than half as many
 runs as rays).  Whenever the key's low bits, below the sorted ones, have room
 for it, the ray's (or chunk's) index rides there: the packed keys are then all
-different, and the avx2 and avx512 builds sort them with NumPy's quicksort (see
-``sort_u32`` and ``sort_u64`` below).  Every other case is a stable LSD radix sort on the bits
-from the highest to the lowest one that differ between the packet's keys, in
-digits of 8 to :data:`MAX_DIGIT_BITS` bits (:func:`digit_plan`; a pass whose
-digit is the same for every key is skipped).  The sorted run is then cut into
-sub-packets of at most ``packet_size`` rays, and also wherever the top
-``split_bits`` bits of the key change.
+different, and the avx2 and avx512 builds sort them with NumPy's quicksort
+(see ``sort_u32`` and ``sort_u64`` below).  Every other case is a stable LSD
+radix sort on the bits from the highest to the lowest one that differ between
+the packet's keys, in digits of 8 to :data:`MAX_DIGIT_BITS` bits
+(:func:`digit_plan`; a pass whose digit is the same for every key is skipped).
+The sorted run is then cut into sub-packets of at most ``packet_size`` rays, and
+also wherever the top ``split_bits`` bits of the key change.
 
 Coordinates that are NaN map to 0 and everything is clamped to [0, 1], so no
 ray (NaN, infinite, zero direction) can make the kernel misbehave; the gather
@@ -114,8 +114,8 @@ cdef extern from *:
     /* q[j] = (int)(min(max(c[j], 0), 1) * 65535): a coordinate clamped to [0, 1] (NaN
      * -> 0) and quantised to 16 bits (COORD_BITS: 65535 = 2^16 - 1).  MAXPS/MINPS return the second operand on NaN,
      * as rs_maxf/rs_minf do, so every ISA gives the same q (sixteen at a time with
-     * AVX-512, eight with AVX2, four with SSE); written with intrinsics because the compiler leaves the branchy
-     * scalar form unvectorised. */
+     * AVX-512, eight with AVX2, four with SSE); written with intrinsics because the
+     * compiler leaves the branchy scalar form unvectorised. */
     static inline void rs_keysort_quantise(const float *c, int32_t *q, int m)
     {
         int j = 0;
@@ -950,8 +950,6 @@ cdef int sort_compact(const uint64_t *keys, int n, int start, uint64_t vary, int
     idx = (<uint32_t> 1 << index_bits) - 1
     ray_order(k32, n, idx, start, order + start)
     return cut_packets(k32, n, start, packet_size, q, True, offsets)
-
-
 
 
 cdef inline void gather_run(const uint64_t *keys, int n, int bottom, int length, int at,
