@@ -170,6 +170,25 @@ def test_reading_the_batch_takes_the_frustum_walk_as_the_packets(each_isa, siben
     assert (counters.ia > 0) == frustum
 
 
+@pytest.mark.parametrize("frustum", [True, False])
+def test_reading_the_batch_in_short_sub_packets_as_the_packets(each_isa, sibenik, frustum):
+    """Camera rays in sub-packets of 1 to 100 rays, most shorter than a chunk (the scratch
+    is filled only as far as a sub-packet's rays; one under RS_FRUSTUM_MIN_RAYS skips its
+    bounds): brute force's hits and the packet path's counters, some chunks walked."""
+    rays = camera_rays(sibenik, 64, 64)[0].rays
+    ref = brute_force(sibenik.vertices, sibenik.faces, rays)
+    sizes = np.resize([1, 3, 15, 16, 17, 33, 63, 64, 65, 100], len(rays))
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    offsets = np.append(offsets[offsets < len(rays)], len(rays)).astype(np.int32)
+    order = np.arange(len(rays), dtype=np.int32)
+    _, expected = trace(sibenik.bvh(), rays, order, offsets, frustum=frustum)
+    hits, counters, _ = trace_batch(sibenik.bvh(), rays, order, offsets, frustum=frustum)
+    assert_same_hits(hits, ref, f"{each_isa} sibenik camera, short sub-packets")
+    assert counters == expected
+    assert counters.rays == len(rays)
+    assert (counters.ia > 0) == frustum
+
+
 def test_reading_the_batch_traces_invalid_rays_as_misses(each_isa, soup):
     """Rays that break the ray contract (NaN, infinite, tmin < 0) are misses, and the first
     in the sorter's order is reported, as the gather does; empty intervals are misses
