@@ -19,7 +19,9 @@ from __future__ import annotations
 import csv
 import itertools
 import json
+import math
 import os
+import reprlib
 import statistics
 import sys
 import time
@@ -33,7 +35,7 @@ from raysort.errors import ConfigError
 from raysort.pipeline import Pipeline
 from raysort.scene import load_scene
 
-__all__ = ["Job", "matrix", "run_sweep", "time_against_baseline", "format_table", "add_parser"]
+__all__ = ["Job", "add_parser", "format_table", "matrix", "run_sweep", "time_against_baseline"]
 
 #: the paper's baseline (Manta's ranged traversal over 8x8 packets in generation order)
 PAPER_BASELINE = {"sorter": "none:packet_size=64", "traversal": "ranged"}
@@ -129,7 +131,7 @@ def _measure(job, pipe, baseline):
     try:
         row.update(time_against_baseline(pipe, baseline, job.rounds, job.width, job.height,
                                           job.spp, job.seed))
-    except Exception as exc:  # one broken configuration must not end a sweep of hours
+    except Exception as exc:  # noqa: BLE001 (one broken configuration must not end a sweep)
         row["error"] = f"{type(exc).__name__}: {exc}"
     machine = machine_info()
     row.update(worker_info(), cpu=machine["cpu"], cores=machine["cores"],
@@ -178,7 +180,12 @@ def run_sweep(jobs, path, *, client=None, csv_path=None, resume=False, progress=
 
 def _run_on(client, todo, scenes, pipes):
     """Rows of ``todo`` as they finish on the workers of ``client``."""
-    from raysort.distributed import finished, pipeline_recipe, send_scene, worker_threads
+    from raysort.distributed import (
+        finished,
+        pipeline_recipe,
+        send_scene,
+        worker_threads,
+    )
 
     if not todo:
         return
@@ -219,16 +226,92 @@ class _Store:
 
 
 def _read(path):
+    """The rows of the results file ``path`` by key ({} if there is none).
+
+    The whole file is checked here, before any job runs: every row must hold what
+    resuming, writing and the table read later (:func:`_row_problem`).
+    """
     if not os.path.exists(path):
         return {}
     try:
         with open(path, encoding="utf-8") as fh:
             doc = json.load(fh)
-        if doc.get("format") != FORMAT:
-            raise ValueError(f"not a raysort sweep file (format {doc.get('format')!r})")
-        return {row["key"]: row for row in doc["results"]}
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+    except RecursionError:
+        raise ConfigError(f"cannot resume from {path}: nested too deeply") from None
+    except (OSError, ValueError) as exc:
         raise ConfigError(f"cannot resume from {path}: {exc}") from None
+    problem = _file_problem(doc)
+    if problem is not None:
+        raise ConfigError(f"cannot resume from {path}: {problem}")
+    return {row["key"]: row for row in doc["results"]}
+
+
+def _finite(value):
+    """A number the table can format: not a bool, NaN, an infinity or an int past float."""
+    try:
+        return (isinstance(value, (int, float)) and not isinstance(value, bool)
+                and math.isfinite(value))
+    except OverflowError:
+        return False
+
+
+_TEXT = (lambda v: isinstance(v, str), "a string")
+_ERROR = (lambda v: v is None or isinstance(v, str), "null or a string")
+_WHOLE = (lambda v: isinstance(v, int) and not isinstance(v, bool), "a whole number")
+_FLAG = (lambda v: isinstance(v, bool), "true or false")
+_FINITE = (_finite, "a finite number")
+#: the fields of every row that resuming and the table read, with what each must be
+_ROW_FIELDS = {"key": _TEXT, "error": _ERROR, "scene": _TEXT, "label": _TEXT,
+               "depth": _WHOLE, "host": _TEXT}
+#: the fields the table reads of a finished row (``error`` null) besides
+_FINISHED_FIELDS = {
+    "scene_name": _TEXT, "baseline_sorter": _TEXT, "baseline_traversal": _TEXT,
+    "worker": _TEXT, "cpu": _TEXT, "isa": _TEXT, "identical_image": _FLAG,
+    "exact_traversal": _FLAG, "median_seconds": _FINITE, "median_baseline_seconds": _FINITE,
+    "median_ratio": _FINITE, "min_ratio": _FINITE, "max_ratio": _FINITE}
+#: how deep values may nest in a row (the rows written here nest 2 levels)
+_MAX_NESTING = 32
+
+
+def _file_problem(doc):
+    """Why ``doc`` (a parsed results file) cannot be resumed, or None: the first bad row."""
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        found = doc.get("format") if isinstance(doc, dict) else None
+        return f"not a raysort sweep file (format {found!r})"
+    if not isinstance(doc.get("results"), list):
+        return "'results' is not a list of rows"
+    seen = {}
+    for number, row in enumerate(doc["results"], 1):
+        problem = _row_problem(row)
+        if problem is None and row["key"] in seen:
+            problem = f"the same key as row {seen[row['key']]}"
+        if problem is not None:
+            return f"row {number}: {problem}"
+        seen[row["key"]] = number
+    return None
+
+
+def _row_problem(row):
+    """Why ``row`` is not a row of a results file, or None."""
+    if not isinstance(row, dict):
+        return f"not an object: {reprlib.repr(row)}"
+    fields = dict(_ROW_FIELDS, **(_FINISHED_FIELDS if row.get("error") is None else {}))
+    for name, (check, what) in fields.items():
+        if name not in row:
+            return f"no {name!r}"
+        if not check(row[name]):
+            return f"{name!r} must be {what}, got {reprlib.repr(row[name])}"
+    if _nesting(row) > _MAX_NESTING:
+        return f"values nested more than {_MAX_NESTING} levels deep"
+    return None
+
+
+def _nesting(value, limit=_MAX_NESTING):
+    """How deep lists and objects nest in ``value`` (counting stops past ``limit``)."""
+    if limit < 0 or not isinstance(value, (list, dict)):
+        return 0
+    items = value.values() if isinstance(value, dict) else value
+    return 1 + max((_nesting(v, limit - 1) for v in items), default=0)
 
 
 def _write(path, csv_path, rows):
@@ -238,11 +321,11 @@ def _write(path, csv_path, rows):
     if csv_path:
         flat = [_flat(row) for row in rows]
         columns = list(dict.fromkeys(k for row in flat for k in row))
-        with output.atomic_target(csv_path) as tmp:
-            with open(tmp, "w", newline="", encoding="utf-8") as fh:
-                writer = csv.DictWriter(fh, columns)
-                writer.writeheader()
-                writer.writerows(flat)
+        with (output.atomic_target(csv_path) as tmp,
+              open(tmp, "w", newline="", encoding="utf-8") as fh):
+            writer = csv.DictWriter(fh, columns)
+            writer.writeheader()
+            writer.writerows(flat)
 
 
 def _flat(row, prefix=""):
@@ -252,8 +335,19 @@ def _flat(row, prefix=""):
         if isinstance(v, dict):
             out.update(_flat(v, f"{prefix}{k}."))
         else:
-            out[prefix + k] = " ".join(map(repr, v)) if isinstance(v, list) else v
+            v = " ".join(map(repr, v)) if isinstance(v, list) else v
+            out[_shown(prefix + k)] = _shown(v) if isinstance(v, str) else v
     return out
+
+
+def _shown(text):
+    """``text`` as UTF-8 can encode it: the bytes of a file name that is not UTF-8 (which
+    Python decodes to lone surrogates, as in ``sys.argv``) become ``\\xNN`` escapes."""
+    try:
+        raw = text.encode("utf-8", "surrogateescape")
+    except UnicodeEncodeError:                   # a lone surrogate of no byte (from a file)
+        raw = text.encode("utf-8", "backslashreplace")
+    return raw.decode("utf-8", "backslashreplace")
 
 
 # --------------------------------------------------------------------------
@@ -263,6 +357,8 @@ def _flat(row, prefix=""):
 def format_table(rows, stream=None):
     """The rows grouped by machine (host, CPU, SIMD path): median seconds and ratios."""
     stream = sys.stdout if stream is None else stream
+    rows = [{k: _shown(v) if isinstance(v, str) else v for k, v in row.items()}
+            for row in rows]                     # a stream may not take a name's odd bytes
     machines = {}
     for row in rows:
         if row["error"] is None:
@@ -296,6 +392,7 @@ def add_parser(sub):
     from raysort.argtypes import SCHEDULER_HELP
     from raysort.argtypes import non_negative as _non_negative
     from raysort.argtypes import positive as _positive
+    from raysort.argtypes import seed as _seed
     from raysort.argtypes import size as _size
 
     s = sub.add_parser("sweep", help="time a matrix of configurations against a baseline, "
@@ -314,7 +411,7 @@ def add_parser(sub):
                    help=f"the baseline's traversal ({PAPER_BASELINE['traversal']})")
     s.add_argument("--size", type=_size, default=(256, 256), help="WIDTHxHEIGHT (256x256)")
     s.add_argument("--spp", type=_positive, default=4, help="samples per pixel (4)")
-    s.add_argument("--seed", type=_non_negative, default=0, help="random seed (0)")
+    s.add_argument("--seed", type=_seed, default=0, help="random seed, 0..2**32-1 (0)")
     s.add_argument("--rounds", type=_positive, default=3,
                    help="interleaved rounds of configuration and baseline (3)")
     s.add_argument("--scheduler", default=None, metavar="ADDRESS", help=SCHEDULER_HELP)
@@ -332,8 +429,11 @@ def cmd_sweep(args):
     from raysort.progress import Progress
 
     for path in (args.output, args.csv):
-        if path:
+        if path is not None:                     # "" too: it cannot be written
             output.check_writable(path)
+    if args.csv is not None and os.path.realpath(args.csv) == os.path.realpath(args.output):
+        raise ConfigError(f"--csv {args.csv!r} is the results file {args.output!r}; give it "
+                          f"another name")
     width, height = args.size
     jobs = matrix(args.scenes, args.sorters, args.traversals, args.depths or (2,),
                   width=width, height=height, spp=args.spp, seed=args.seed,
@@ -347,7 +447,7 @@ def cmd_sweep(args):
         finally:
             progress.close()
     format_table(rows)
-    print(f"\nwrote {args.output}" + (f" and {args.csv}" if args.csv else ""))
+    print(_shown(f"\nwrote {args.output}" + (f" and {args.csv}" if args.csv else "")))
     bad = [r for r in rows if r["error"] is not None
            or (r["exact_traversal"] and not r["identical_image"])]
     return 1 if bad else 0
