@@ -106,8 +106,29 @@ def _print_summary(result, out, stats_table, stream=None, created=()):
     if out:
         layers = f" (AOV layers: {', '.join(result.aov)})" if result.aov else ""
         made = "".join(f" (created directory {d})" for d in created)
-        print(f"  wrote {out}{layers} and {os.path.splitext(out)[0] + '.png'}{made}",
-              file=stream)
+        png = os.path.splitext(out)[0] + ".png"
+        print(f"  wrote {_shown(out)}{layers} and {_shown(png)}{made}", file=stream)
+
+
+def _shown(path):
+    """A path as text any terminal takes: bytes of its name that are not UTF-8 (a POSIX
+    name may hold them) as backslash escapes."""
+    return os.fsencode(path).decode("utf-8", "backslashreplace")
+
+
+def _distinct_outputs(scene, outputs):
+    """ConfigError if two of the ``(what, path)`` outputs (path None: not written) are one
+    file, or one of them is the scene file given on the command line."""
+    seen = {}
+    if scene is not None and os.path.isfile(scene):
+        seen[os.path.realpath(scene)] = f"the scene file {scene!r}"
+    for what, path in outputs:
+        if not path:
+            continue
+        key = os.path.realpath(path)
+        if key in seen:
+            raise ConfigError(f"{what} {path!r} is {seen[key]}; give it another name")
+        seen[key] = f"{what} {path!r}"
 
 
 def cmd_render(args):
@@ -116,16 +137,14 @@ def cmd_render(args):
     from raysort.progress import Progress
 
     out = args.output
-    if not out.lower().endswith(".exr"):
+    if os.path.splitext(out)[1].lower() != ".exr":
         raise ConfigError(f"the output must be an .exr file (a .png preview is written next "
                           f"to it), got {out!r}")
     png = os.path.splitext(out)[0] + ".png"
-    clash = [p for p in (out, png) if args.json
-             and os.path.realpath(args.json) == os.path.realpath(p)]
-    if clash:
-        raise ConfigError(f"--json {args.json!r} is the image {clash[0]!r}; give it another name")
+    _distinct_outputs(args.scene, [("the image", out), ("the preview", png),
+                                   ("--json", args.json)])
     for path in (out, png, args.json):
-        if path:
+        if path is not None:
             output.check_writable(path, parents=True)
     pipe = Pipeline(args.scene, generator=args.generator, sorter=args.sorter,
                     traversal=args.traversal, shader=_shader_config(args), tile=args.tile,

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import logging
 import math
 import os
 import socket
@@ -114,10 +115,13 @@ def connect(scheduler):
         # second.  And no MALLOC_TRIM_THRESHOLD_ (Dask's nanny default): it turns off
         # glibc's adaptive mmap threshold, so every large temporary array of a tile is
         # mapped and faulted in afresh (70x the page faults, 10-15 % more CPU per render).
+        # The workers log nothing: a task's error reaches the caller as the exception
+        # itself (one line from the command), not also as a worker's logged traceback.
         with dask.config.set({"distributed.worker.profile.enabled": False,
                               "distributed.nanny.pre-spawn-environ": {}}), \
                 dd.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                dashboard_address=":0") as cluster, dd.Client(cluster) as client:
+                                dashboard_address=":0", silence_logs=logging.CRITICAL) \
+                as cluster, dd.Client(cluster) as client:
             yield client
         return
     try:

@@ -92,11 +92,15 @@ def _path_problem(path, parents=False, probe=True):
     deepest existing ancestor is a directory.  With `probe`, a file is
     created and removed in the directory to be sure.
     """
-    path = os.fspath(path)
+    path = _final(path)
     if not path:
         return "the path is empty"
     if os.path.isdir(path):
         return "it is a directory"
+    if path.endswith(os.sep) or os.altsep and path.endswith(os.altsep):
+        return "it names a directory, not a file"
+    if _special(path):      # written through (atomic_target), as a shell's > does
+        return None if os.access(path, os.W_OK) else "it is not writable"
     parent = os.path.dirname(path) or os.curdir
     if not os.path.exists(parent):
         blocker = _first_non_directory(parent)
@@ -110,6 +114,19 @@ def _path_problem(path, parents=False, probe=True):
     if not os.access(parent, os.W_OK | os.X_OK):
         return f"directory {_q(parent)} is not writable"
     return _probe(parent, os.path.basename(path)) if probe else None
+
+
+def _final(path):
+    """The file a write to `path` ends in: the target of a symbolic link (written
+    through, not replaced), else `path` itself."""
+    path = os.fspath(path)
+    return os.path.realpath(path) if path and os.path.islink(path) else path
+
+
+def _special(path):
+    """Whether `path` exists and is neither a regular file nor a directory (a device
+    such as /dev/null, a pipe)."""
+    return os.path.exists(path) and not os.path.isfile(path) and not os.path.isdir(path)
 
 
 def _deepest_existing(path):
@@ -240,7 +257,7 @@ def _temporary(path):
     problem = _path_problem(path, probe=False)  # mkstemp below is the probe
     if problem is not None:
         raise OutputError(f"cannot write {_q(path)}: {problem}")
-    path = os.fspath(path)
+    path = _final(path)
     directory, name = os.path.split(path)
     try:
         fd, tmp = tempfile.mkstemp(dir=directory or os.curdir,
@@ -295,6 +312,8 @@ def atomic_target(path):
     The temporary file is created in the same directory as `path` (so the
     final :func:`os.replace` is atomic) and is removed if the body raises
     anything, including :class:`KeyboardInterrupt`; `path` is then untouched.
+    A symbolic link is written through (its target is replaced, the link kept);
+    a device or a pipe (``/dev/null``) is written to directly.
 
     Parameters
     ----------
@@ -311,12 +330,18 @@ def atomic_target(path):
     OutputError
         If `path` cannot be written or an operating-system call fails.
     """
+    if _special(_final(path)):     # no file to replace: the output goes straight in
+        try:
+            yield _final(path)
+        except OSError as exc:
+            raise _os_error(path, exc) from exc
+        return
     with _temporary(path) as tmp:
         yield tmp
         _finish(tmp, path)
-        _rename(tmp, path)
+        _rename(tmp, _final(path))
     with contextlib.suppress(OSError):
-        _fsync(os.path.dirname(os.fspath(path)) or os.curdir)
+        _fsync(os.path.dirname(_final(path)) or os.curdir)
 
 
 # --------------------------------------------------------------------------
@@ -473,9 +498,22 @@ def _prepared_exr(image, metadata, channels=None):
 def _write_exr_file(exr, tmp, path):
     """Write `exr` to the file `tmp`; errors name the final `path`."""
     try:
-        exr.write(tmp)
+        if _utf8(tmp):
+            exr.write(tmp)
+        else:       # OpenEXR takes only UTF-8 names; a file object any the OS has
+            with open(tmp, "wb") as stream:
+                exr.write(stream)
     except RuntimeError as exc:
         raise OutputError(f"cannot write {_q(path)}: OpenEXR: {exc}") from exc
+
+
+def _utf8(path):
+    """Whether the name `path` is valid UTF-8 (a POSIX name need not be)."""
+    try:
+        os.fspath(path).encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
 
 
 def _check_readable(path, magic, kind):
@@ -532,7 +570,11 @@ def read_exr_channels(path):
     _check_readable(path, _EXR_MAGIC, "an OpenEXR")
     OpenEXR = _openexr()
     try:
-        channels = OpenEXR.File(os.fspath(path), separate_channels=True).channels()
+        if _utf8(path):
+            channels = OpenEXR.File(os.fspath(path), separate_channels=True).channels()
+        else:       # OpenEXR takes only UTF-8 names; a file object any the OS has
+            with open(path, "rb") as stream:
+                channels = OpenEXR.File(stream, separate_channels=True).channels()
     except (RuntimeError, ValueError) as exc:
         raise OutputError(f"cannot read {_q(path)}: OpenEXR: {exc}") from exc
     return {name: np.asarray(channel.pixels) for name, channel in channels.items()}

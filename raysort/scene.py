@@ -15,6 +15,7 @@ Degenerate (zero-area) triangles are kept and never hit.
 from __future__ import annotations
 
 import os
+import stat
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -140,14 +141,32 @@ class Scene:
 # mesh files
 # --------------------------------------------------------------------------
 
+def _not_a_file(path):
+    """Why ``path`` is not a readable regular file ("does not exist", "is not a file",
+    or what the operating system says), or None."""
+    try:
+        mode = os.stat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        return "does not exist"
+    except OSError as exc:          # a name too long, a loop of links, ...
+        return f"cannot be read: {exc.strerror or exc}"
+    return None if stat.S_ISREG(mode) else "is not a file"
+
+
+def _printable(name):
+    """A file name as text any output takes: bytes that are not UTF-8 (a POSIX name
+    may hold them) as backslash escapes."""
+    return os.fsencode(name).decode("utf-8", "backslashreplace")
+
+
 def load_mesh(path):
     """``(vertices, faces, face_colors)`` of a mesh file; colours are uint8 (m, 3) or None."""
     import trimesh
 
     path = Path(path)
-    if not path.is_file():
-        raise SceneError(f"mesh '{path}' does not exist" if not path.exists()
-                         else f"mesh '{path}' is not a file")
+    problem = _not_a_file(path)
+    if problem:
+        raise SceneError(f"mesh '{path}' {problem}")
     try:
         with np.errstate(all="ignore"):       # garbage numbers are caught by check_mesh
             mesh = trimesh.load(str(path), process=False)
@@ -205,16 +224,16 @@ def load_scene(spec=None):
             return _load_scene_file(Path(path))
     path = Path(spec)
     if path.suffix.lower() == ".toml":
-        if not path.is_file():
-            raise SceneError(f"scene file '{path}' " + ("is not a file" if path.exists()
-                                                         else "does not exist"))
+        problem = _not_a_file(path)
+        if problem:
+            raise SceneError(f"scene file '{path}' {problem}")
         return _load_scene_file(path)
-    if not path.exists() and not path.suffix:
+    if not os.path.lexists(path) and not path.suffix:
         raise SceneError(f"unknown scene {spec!r}; packaged scenes: {', '.join(scene_names())}"
                          f" (or give a .toml scene file or a mesh file)")
     vertices, faces, colors = load_mesh(path)
     albedo = colors / 255.0 if colors is not None else DEFAULT_ALBEDO
-    return Scene.from_mesh(vertices, faces, albedo=albedo, name=path.stem)
+    return Scene.from_mesh(vertices, faces, albedo=albedo, name=_printable(path.stem))
 
 
 def _framing(vertices, where):
@@ -269,6 +288,8 @@ def _load_scene_file(path):
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise SceneError(f"cannot read scene file '{path}': {exc}") from None
+    except RecursionError:
+        raise SceneError(f"cannot read scene file '{path}': nested too deeply") from None
     _check_keys(where, "", doc)
     for section in ("mesh", "camera", "material", "sky"):
         if section in doc:
@@ -338,6 +359,6 @@ def _load_scene_file(path):
     sky = _non_negative3(where, "sky.radiance", doc.get("sky", {}).get("radiance", (0, 0, 0)))
     try:
         return Scene(vertices, faces, albedo, emission, camera, sky, lights,
-                     doc.get("name", path.stem), str(path))
+                     doc.get("name", _printable(path.stem)), str(path))
     except SceneError as exc:
         raise SceneError(f"scene file '{where}': {exc}") from None

@@ -347,6 +347,63 @@ def test_json_may_not_overwrite_the_image(json_name, tmp_path, capsys, monkeypat
     assert out == "" and os.listdir(tmp_path) == ["sub"]
 
 
+@pytest.mark.parametrize("argv, fragment", [
+    (["--json", "foo/"], "names a directory"),             # foo does not exist yet
+    (["--json", "a/b/"], "names a directory"),
+    (["--json", ""], "the path is empty"),
+    (["-o", "newdir/.exr"], "must be an .exr file"),       # '.exr' is a name, not a suffix
+    (["-o", "x.exr", "--json", "scene.toml"], "is the scene file"),
+])
+def test_bad_output_paths_fail_before_the_render(argv, fragment, tmp_path, capsys,
+                                                 monkeypatch):
+    """Outputs that cannot be written as asked fail up front in one line, exit 2, and
+    nothing is written or created (the scene file is not overwritten)."""
+    monkeypatch.chdir(tmp_path)
+    scene = tmp_path / "scene.toml"
+    scene.write_text('[mesh]\nprocedural = "plane"\n')
+    code, out, err = run(capsys, "render", "scene.toml", *TINY, *argv)
+    assert code == 2
+    assert_one_line_error(err, fragment)
+    assert out == "" and os.listdir(tmp_path) == ["scene.toml"]
+    assert scene.read_text() == '[mesh]\nprocedural = "plane"\n'
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/null"), reason="needs /dev/null")
+def test_json_to_a_device_writes_through_it(tmp_path, capsys):
+    """--json /dev/null writes into the device (as a shell's > does) instead of
+    replacing the device node with a file."""
+    before = os.stat("/dev/null")
+    code, _, err = run(capsys, "render", "plane", *TINY, "-o", tmp_path / "x.exr",
+                       "--json", "/dev/null")
+    assert code == 0, err
+    after = os.stat("/dev/null")
+    assert (after.st_mode, after.st_rdev) == (before.st_mode, before.st_rdev)
+
+
+def test_json_through_a_symbolic_link_keeps_the_link(tmp_path, capsys):
+    link = tmp_path / "link.json"
+    link.symlink_to(tmp_path / "real.json")
+    code, _, err = run(capsys, "render", "plane", *TINY, "-o", tmp_path / "x.exr",
+                       "--json", link)
+    assert code == 0, err
+    assert link.is_symlink() and json.loads((tmp_path / "real.json").read_text())["stats"]
+
+
+@pytest.mark.skipif(sys.platform == "win32" or sys.platform == "darwin",
+                    reason="needs a file system that takes names that are not UTF-8")
+def test_names_that_are_not_utf8_render(tmp_path, capsys):
+    """A mesh and an output whose names are not UTF-8 (POSIX allows any bytes): the
+    render is written, the scene's name printable."""
+    mesh = os.path.join(os.fsencode(tmp_path), b"\xff\xfe.obj")
+    with open(mesh, "wb") as fh:
+        fh.write(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    exr = os.fsdecode(os.path.join(os.fsencode(tmp_path), b"\xffout.exr"))
+    code, _, err = run(capsys, "render", os.fsdecode(mesh), *TINY, "-o", exr)
+    assert code == 0, err
+    assert output.read_png(exr[:-4] + ".png").shape == (6, 8, 3)
+    assert raysort.load_scene(os.fsdecode(mesh)).name == "\\xff\\xfe"
+
+
 # --------------------------------------------------------------------------
 # listings
 # --------------------------------------------------------------------------

@@ -548,6 +548,56 @@ def test_path_is_directory(tmp_path):
     assert _listdir(tmp_path) == ["dir.exr"] and _listdir(path) == []
 
 
+def test_a_path_ending_in_a_separator_names_no_file(tmp_path):
+    """'out/' names a directory even before it exists: nothing is created for it."""
+    path = os.path.join(tmp_path, "out") + os.sep
+    _assert_output_error(lambda: output.check_writable(path, parents=True), path,
+                         "names a directory")
+    assert _listdir(tmp_path) == []
+
+
+def test_a_symbolic_link_is_written_through(tmp_path):
+    """The link's target gets the file (atomically); the link stays a link."""
+    link = tmp_path / "link.exr"
+    link.symlink_to(tmp_path / "target.exr")
+    image = _special_image()
+    output.write_exr(link, image)
+    assert link.is_symlink()
+    assert np.array_equal(_bits(output.read_exr(tmp_path / "target.exr")), _bits(image))
+    assert sorted(_listdir(tmp_path)) == ["link.exr", "target.exr"]
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs named pipes")
+def test_a_device_or_pipe_is_written_into_not_replaced(tmp_path):
+    """A target that is neither a regular file nor a directory (/dev/null, a named
+    pipe) gets the output written into it; its node is not replaced by a file."""
+    import threading
+
+    fifo = tmp_path / "pipe.json"
+    os.mkfifo(fifo)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(fifo.read_bytes()), daemon=True)
+    reader.start()
+    output.write_json(fifo, {"a": 1})
+    reader.join(10)
+    assert got and b'"a"' in got[0]
+    assert not fifo.is_file() and _listdir(tmp_path) == ["pipe.json"]
+    if os.path.exists("/dev/null"):
+        output.write_json("/dev/null", {"a": 1})
+        assert not os.path.isfile("/dev/null")
+
+
+@pytest.mark.skipif(sys.platform in ("win32", "darwin"),
+                    reason="needs a file system that takes names that are not UTF-8")
+def test_exr_names_that_are_not_utf8(tmp_path):
+    """OpenEXR takes only UTF-8 names; a POSIX name may hold any bytes."""
+    path = os.fsdecode(os.path.join(os.fsencode(tmp_path), b"\xff\xfe.exr"))
+    image = _special_image()
+    output.write_exr(path, image)
+    assert np.array_equal(_bits(output.read_exr(path)), _bits(image))
+    assert _listdir(tmp_path) == [os.path.basename(path)]
+
+
 @pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0,
                     reason="root can write to read-only directories")
 def test_read_only_directory(tmp_path):

@@ -397,6 +397,21 @@ def test_unreadable_scene_file(tmp_path, content):
         raysort.load_scene(path)
 
 
+def test_a_scene_file_nested_too_deeply(tmp_path):
+    """TOML nested thousands of levels deep is a SceneError, not a RecursionError."""
+    path = tmp_path / "deep.toml"
+    path.write_text("a = " + "[" * 5000 + "]" * 5000 + "\n")
+    with pytest.raises(SceneError, match="deep.toml.*nested too deeply"):
+        raysort.load_scene(path)
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".toml"])
+def test_a_name_too_long_for_the_system(suffix):
+    """A file name the operating system refuses (ENAMETOOLONG) is a SceneError."""
+    with pytest.raises(SceneError, match="cannot be read"):
+        raysort.load_scene("b" * 300 + suffix)
+
+
 def test_missing_scene_file_and_unknown_name(tmp_path):
     """A missing .toml, or a bare name that is neither packaged nor a file, is a SceneError."""
     with pytest.raises(SceneError, match="missing.toml"):
