@@ -12,7 +12,7 @@ import numpy as np
 
 from raysort.errors import ConfigError
 
-__all__ = ["integer", "number", "boolean", "vector3", "FLOAT32_MAX"]
+__all__ = ["integer", "number", "boolean", "choice", "vector3", "FLOAT32_MAX"]
 
 #: the largest finite float32: every coordinate and colour ends up in float32
 FLOAT32_MAX = float(np.finfo(np.float32).max)
@@ -65,3 +65,11 @@ def boolean(name, value, *, allow_none=False):
         return None if value is None else bool(value)
     raise ConfigError(f"{name} must be true or false{' or None' if allow_none else ''}, "
                       f"got {value!r}")
+
+
+def choice(name, value, options):
+    """``value`` if it is one of the strings ``options``; ConfigError naming ``name`` and
+    the options otherwise (whatever its type)."""
+    if not isinstance(value, str) or value not in options:
+        raise ConfigError(f"{name} must be one of {', '.join(options)}; got {value!r}")
+    return value

@@ -19,7 +19,7 @@ built against :func:`get_include`)::
   views such as ``packets.t``) and layout limits (:data:`MAX_PACKET`), all
   derived from ``raysort/include/raysort/types.h``;
 * **parameter validators** (:func:`integer`, :func:`number`, :func:`boolean`,
-  :func:`vector3`), which raise :class:`ConfigError` naming the parameter;
+  :func:`choice`, :func:`vector3`), which raise :class:`ConfigError` naming the parameter;
 * **contract checks** (:func:`check_sort`, :func:`check_hits` with
   :func:`before_traversal`, :func:`check_counters`, :func:`check_generated`,
   :func:`check_bounce`, and :func:`check_packets` for large-packet
@@ -30,7 +30,7 @@ from raysort.contract import (before_traversal, check_bounce, check_counters, ch
                               check_hits, check_packets, check_sort)
 from raysort.errors import ConfigError, PluginContractError
 from raysort.orders import identity_order
-from raysort.params import boolean, integer, number, vector3
+from raysort.params import boolean, choice, integer, number, vector3
 from raysort.paths import Bounce, Paths, ShadowRays
 from raysort.plugin import Generator, Shader, Sorter, Traversal
 from raysort.rays import MAX_PACKET, Hits, PacketRow, Packets, RayBatch, RayRow
@@ -50,7 +50,7 @@ __all__ = [
     "Generator", "Sorter", "Traversal", "Shader", "LibraryTraversal",
     "RayBatch", "Packets", "Hits", "Paths", "Bounce", "ShadowRays", "Counters",
     "MAX_PACKET", "RayRow", "PacketRow", "fixed_packets", "identity_order",
-    "integer", "number", "boolean", "vector3",
+    "integer", "number", "boolean", "choice", "vector3",
     "check_sort", "check_hits", "before_traversal", "check_counters", "check_generated",
     "check_bounce", "check_packets", "ConfigError", "PluginContractError", "get_include",
 ]

@@ -16,6 +16,7 @@ import numpy as np
 
 from raysort import isa
 from raysort.contract import check_bounce
+from raysort.errors import SceneError
 from raysort.params import boolean, integer
 from raysort.paths import Bounce, ShadowRays
 from raysort.plugin import Shader
@@ -500,6 +501,10 @@ class LambertShader(Shader):
         bounce = Bounce(next_rays.truncate(k), next_parent[:k], _pack_rows(next_thr, 3, k),
                         shadow)
         if paths_bad:       # the contract's check says what is wrong, naming the shader
+            if m and not np.isfinite(sh_contrib[:, :m]).all():  # the scene's lights, not a bug
+                raise SceneError("a shadow ray's contribution is not a float32 number (inf "
+                                 "or NaN): a point light of the scene is too bright, too far "
+                                 "away or too close to a surface")
             check_bounce(self, bounce, len(rays), len(radiance), radiance)
             raise AssertionError("lambert's own check found a path that check_bounce passes")
         return bounce

@@ -28,7 +28,7 @@ each large packet (see :mod:`raysort.sorters._keysort`), then cut into sub-packe
 """
 from __future__ import annotations
 
-from raysort.sdk import ConfigError, integer
+from raysort.sdk import choice, integer
 from raysort.sorters._keysort import COORD_BITS, KeySorter
 
 __all__ = ["OriginDirectionSorter", "LAYOUTS"]
@@ -81,9 +81,7 @@ class OriginDirectionSorter(KeySorter):
 
     def __init__(self, *, layout="interleaved", lead=3, bits=24, packet_size=64, split_bits=0,
                  octant=True):
-        if layout not in LAYOUTS:
-            raise ConfigError(f"layout must be one of {', '.join(LAYOUTS)}; got {layout!r}")
-        self.layout = layout
+        self.layout = choice("layout", layout, LAYOUTS)
         self.lead = integer("lead", lead, 0, COORD_BITS)
         self.coordinates = LAYOUTS[layout]
         self._setup(_levels(layout, self.lead), bits, packet_size, split_bits, octant)

@@ -38,7 +38,7 @@ from raysort.sdk.driver cimport check_packet_layout
 import numpy as np
 
 from raysort import isa
-from raysort.sdk import ConfigError, Counters, Traversal, boolean, integer
+from raysort.sdk import ConfigError, Counters, Traversal, boolean, choice, integer
 
 
 cdef extern from "raysort/stream.h" nogil:
@@ -320,9 +320,7 @@ class StreamTraversal(Traversal):
 
     def __init__(self, *, stream_size=16384, order="votes", min_stream=8, tree=8, frustum=True):
         self.stream_size = integer("stream_size", stream_size, 1, MAX_STREAM)
-        if order not in ORDERS:
-            raise ConfigError(f"order must be one of {', '.join(ORDERS)}; got {order!r}")
-        self.order = order
+        self.order = choice("order", order, ORDERS)
         self.min_stream = integer("min_stream", min_stream, 0, MAX_STREAM)
         self.tree = integer("tree", tree, min(TREES), max(TREES))
         if self.tree not in TREES:
