@@ -1,11 +1,13 @@
 """The ``raysort bench`` command line (added to ``raysort``'s parser by raysort.cli)."""
 from __future__ import annotations
 
+import os
+
 from raysort.argtypes import non_negative, positive, seed, size
 from raysort.bench.configs import load_table, select
-from raysort.errors import ConfigError
+from raysort.errors import ConfigError, OutputError
 
-__all__ = ["add_parser", "cmd_bench", "PAPER_SCENES"]
+__all__ = ["PAPER_SCENES", "add_parser", "cmd_bench"]
 
 PAPER_SCENES = ("sibenik", "sponza", "forest")
 
@@ -67,8 +69,9 @@ def add_parser(sub):
     b.add_argument("--list", action="store_true", help="list the configurations and stop")
     b.add_argument("--json", default=None, help="write the results as JSON (every round)")
     b.add_argument("--chart", default=None,
-                   help="write a chart (PNG): Fig. 2 style bars, or a heat map of the "
-                        "speedups for --kernels and the matrix")
+                   help="write a chart (.png, .pdf, .svg, ...: the extension names the "
+                        "format): Fig. 2 style bars, or a heat map of the speedups for "
+                        "--kernels and the matrix")
     b.add_argument("-q", "--quiet", action="store_true")
     b.set_defaults(func=cmd_bench)
 
@@ -84,13 +87,37 @@ def bvh_params(text):
     return {k: v for k, v in parse_spec("bvh:" + text).items() if k != "type"}
 
 
+def check_outputs(args):
+    """The chart's format; ConfigError or OutputError now, before anything runs, for an
+    output path that is empty, not writable, the other output or an input file."""
+    from raysort import output
+
+    outputs = [(f"--{k}", p) for k, p in (("json", args.json), ("chart", args.chart))
+               if p is not None]
+    inputs = [("the --configs file", p) for p in args.configs]
+    inputs += [("the scene file", p) for p in args.scenes if os.path.isfile(p)]
+    for k, (flag, path) in enumerate(outputs):
+        try:
+            output.check_writable(path)
+        except OutputError as exc:
+            raise OutputError(f"{flag}: {exc}") from None
+        earlier = [(f"the {f} file", p) for f, p in outputs[:k]]
+        for other, known in earlier + inputs:
+            if os.path.realpath(path) == os.path.realpath(known):
+                raise ConfigError(f"{flag} {path!r} is {other} {known!r}; give it "
+                                  f"another name")
+    if args.chart is not None:
+        from raysort.bench.report import chart_format
+
+        return chart_format(args.chart)
+    return None
+
+
 def cmd_bench(args):
     from raysort import output
     from raysort.progress import Progress
 
-    for path in (args.json, args.chart):
-        if path:
-            output.check_writable(path)
+    chart_fmt = check_outputs(args)
     table = load_table(args.configs, [tuple(a) for a in args.add])
     if args.kernels and not args.sorters:
         configs = table.kernel_configs(args.traversals)
@@ -100,7 +127,7 @@ def cmd_bench(args):
         configs = table.frame_configs(args.sorters, args.traversals)
     if args.only:
         configs = select(configs, args.only)
-    if args.baseline:
+    if args.baseline is not None:
         select(configs, [args.baseline])
         for c in configs:
             c.baseline = args.baseline
@@ -136,14 +163,22 @@ def cmd_bench(args):
                             depth=args.depth, seed=args.seed, threads=args.threads,
                             repeat=args.repeat, order_seed=args.order_seed, bvh=bvh,
                             warmup=args.warmup, progress=progress)
-    from raysort.bench.report import SCHEMA, failures, format_report, write_chart
+    from raysort.bench.report import (
+        SCHEMA,
+        draw_chart,
+        failures,
+        format_report,
+        write_chart,
+    )
 
     report = {"schema": SCHEMA, **report}
     format_report(report)
-    if args.json:
+    # the chart is drawn before anything is written: if it fails, no file is left
+    chart = draw_chart(report, chart_fmt) if chart_fmt else None
+    if args.json is not None:
         output.write_json(args.json, report)
         print(f"\nwrote {args.json}")
-    if args.chart:
-        write_chart(report, args.chart)
+    if chart is not None:
+        write_chart(report, args.chart, chart)
         print(f"wrote {args.chart}")
     return 1 if failures(report) else 0

@@ -5,7 +5,9 @@ paper's experiment, the rules that add every installed traversal or a named
 sorter, the sorter x traversal ``[matrix]`` preset and the ``[kernels]``
 layouts.  A user's TOML file with the same tables (``--configs``) and
 ``--add LABEL TRAVERSAL SORTER`` extend it; this module only expands the rules
-against what is installed, so the bench's code names no plugin.
+against what is installed, so the bench's code names no plugin.  Every file is
+checked as it is read (its tables, keys, types and label templates), so a mistake
+in one is a ConfigError naming the file before anything runs.
 """
 from __future__ import annotations
 
@@ -15,13 +17,14 @@ from pathlib import Path
 
 from raysort import registry
 from raysort.errors import ConfigError
+from raysort.registry import parse_spec
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:                                   # pragma: no cover
     import tomli as tomllib
 
-__all__ = ["Config", "Table", "load_table", "ALL"]
+__all__ = ["ALL", "Config", "Table", "load_table"]
 
 DEFAULT_FILE = Path(__file__).with_name("configs.toml")
 #: the word that stands for every installed sorter or traversal
@@ -54,13 +57,44 @@ def _spec_name(spec):
 
 
 def _read(path):
+    where = f"--configs {str(path)!r}"
     try:
         with open(path, "rb") as fh:
             return tomllib.load(fh)
     except OSError as exc:
-        raise ConfigError(f"--configs {str(path)!r}: {exc.strerror or exc}") from None
+        raise ConfigError(f"{where}: {exc.strerror or exc}") from None
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"--configs {str(path)!r}: not valid TOML ({exc})") from None
+        raise ConfigError(f"{where}: not valid TOML ({exc})") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{where}: not valid TOML (not UTF-8 text)") from None
+    except RecursionError:
+        raise ConfigError(f"{where}: not valid TOML (nested too deeply)") from None
+
+
+# --------------------------------------------------------------------------
+# checking a file's tables (before anything runs)
+# --------------------------------------------------------------------------
+
+#: the keys of each table ("": the file's top level)
+KEYS = {
+    "": ("render", "config", "each_traversal", "each_sorter", "matrix", "kernels"),
+    "render": ("shader", "depth_parameter", "baseline", "compare"),
+    "config": ("label", "traversal", "sorter", "baseline", "paper"),
+    "each_traversal": ("label", "sorter", "baseline"),
+    "each_sorter": ("label", "traversal", "baseline"),
+    "matrix": ("label", "baseline_sorter"),
+    "kernels": ("workloads", "baseline", "label", "packets"),
+}
+#: the placeholders a label template may use, by table
+PLACEHOLDERS = {"each_traversal": ("traversal",), "each_sorter": ("sorter",),
+                "matrix": ("traversal", "sorter"), "kernels": ("traversal", "packets")}
+SPEC = "a name, 'name:key=value,...' or a table with a 'type' key"
+
+
+def _brief(value, limit=60):
+    """``repr(value)``, shortened for a one-line message."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def _need(table, key, where):
@@ -69,26 +103,178 @@ def _need(table, key, where):
     return table[key]
 
 
+def _keys(table, name, where):
+    unknown = [k for k in table if k not in KEYS[name]]
+    if unknown:
+        raise ConfigError(f"{where}: unknown key {unknown[0]!r} (known: "
+                          f"{', '.join(KEYS[name])})")
+
+
+def _table(parent, key, where):
+    """``parent[key]``: a table ({} if absent), its keys checked."""
+    value = parent.get(key, {})
+    if not isinstance(value, dict):
+        raise ConfigError(f"{where}: {key!r} must be a table ([{key}]), got {_brief(value)}")
+    _keys(value, key, f"{where} [{key}]")
+    return value
+
+
+def _tables(parent, key, where):
+    """``parent[key]``: an array of tables ([] if absent)."""
+    value = parent.get(key, [])
+    if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+        raise ConfigError(f"{where}: {key!r} must be an array of tables ([[{key}]]), got "
+                          f"{_brief(value)}")
+    return value
+
+
+def _string(table, key, where, default=""):
+    value = table.get(key, default)
+    if not isinstance(value, str):
+        raise ConfigError(f"{where}: {key!r} must be a string, got {_brief(value)}")
+    return value
+
+
+def _label(table, where):
+    _need(table, "label", where)
+    return _string(table, "label", where)
+
+
+def _spec(value, what, where):
+    """A plugin spec: a name, "name:key=value,..." (its syntax checked) or a table
+    with a "type" name."""
+    if isinstance(value, str):
+        try:
+            parse_spec(value)
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {what}: {exc}") from None
+        return value
+    if isinstance(value, dict) and isinstance(value.get("type"), str) and value["type"]:
+        return value
+    raise ConfigError(f"{where}: {what} must be {SPEC}, got {_brief(value)}")
+
+
+def _template(text, name, where):
+    """A label template of table ``name``, checked by filling in its placeholders."""
+    names = PLACEHOLDERS[name]
+    try:
+        text.format(**{n: n for n in names})
+    except KeyError as exc:
+        problem = f"unknown placeholder {{{exc.args[0]}}}"
+    except IndexError:
+        problem = "a placeholder without a name"
+    except (ValueError, AttributeError, TypeError) as exc:
+        problem = str(exc)
+    else:
+        return text
+    raise ConfigError(f"{where}: label {text!r} is not a valid template ({problem}); it may "
+                      f"use {' and '.join('{' + n + '}' for n in names)}")
+
+
+def _render(data, source):
+    where = f"{source} [render]"
+    render = _table(data, "render", source)
+    out = {k: _string(render, k, where) for k in ("depth_parameter", "baseline") if k in render}
+    if "shader" in render:
+        shader = _spec(render["shader"], "'shader'", where)
+        out["shader"] = dict(parse_spec(shader) if isinstance(shader, str) else shader)
+    if "compare" in render:
+        pairs = render["compare"]
+        if not isinstance(pairs, list) or not all(
+                isinstance(p, list) and len(p) == 2 and all(isinstance(w, str) for w in p)
+                for p in pairs):
+            raise ConfigError(f"{where}: 'compare' must be an array of [label, over label] "
+                              f"pairs, got {_brief(pairs)}")
+        out["compare"] = [tuple(p) for p in pairs]
+    return out
+
+
+def _config(entry, where):
+    label = _label(entry, where)
+    where = f"{where} {label!r}"
+    _keys(entry, "config", where)
+    return Config(label, _spec(_need(entry, "traversal", where), "'traversal'", where),
+                  _spec(_need(entry, "sorter", where), "'sorter'", where),
+                  baseline=_string(entry, "baseline", where), paper=_string(entry, "paper", where))
+
+
+def _rule(rule, name, where):
+    """An ``each_traversal`` or ``each_sorter`` rule: its label template, the plugin
+    it fixes (the sorter, or the traversal) and its baseline."""
+    label = _template(_label(rule, where), name, where)
+    where = f"{where} {label!r}"
+    _keys(rule, name, where)
+    fixed = "sorter" if name == "each_traversal" else "traversal"
+    return {"label": label, fixed: _spec(_need(rule, fixed, where), repr(fixed), where),
+            "baseline": _string(rule, "baseline", where)}
+
+
+def _matrix(data, source):
+    where = f"{source} [matrix]"
+    matrix = _table(data, "matrix", source)
+    out = {}
+    if "label" in matrix:
+        out["label"] = _template(_string(matrix, "label", where), "matrix", where)
+    if "baseline_sorter" in matrix:
+        out["baseline_sorter"] = _string(matrix, "baseline_sorter", where)
+    return out
+
+
+def _kernels(data, source):
+    where = f"{source} [kernels]"
+    kernels = _table(data, "kernels", source)
+    out = {}
+    if "label" in kernels:
+        out["label"] = _template(_string(kernels, "label", where), "kernels", where)
+    if "baseline" in kernels:
+        out["baseline"] = _string(kernels, "baseline", where)
+    if "workloads" in kernels:
+        kinds = kernels["workloads"]
+        if not isinstance(kinds, list) or not kinds:
+            raise ConfigError(f"{where}: 'workloads' must be an array of workload kinds, "
+                              f"got {_brief(kinds)}")
+        out["workloads"] = [_spec(k, "each of 'workloads'", where) for k in kinds]
+    if "packets" in kernels:
+        out["packets"] = _packets(kernels["packets"], source)
+    return out
+
+
+def _packets(packets, source):
+    """``[kernels.packets]``: layout name -> sorter spec, at least one."""
+    if not isinstance(packets, dict):
+        raise ConfigError(f"{source} [kernels]: 'packets' must be a table "
+                          f"([kernels.packets]), got {_brief(packets)}")
+    if not packets:
+        raise ConfigError(f"{source}: [kernels.packets] names no packet layout")
+    return {p: _spec(spec, repr(p), f"{source} [kernels.packets]") for p, spec in packets.items()}
+
+
+def _check(data, source):
+    """One file's tables with every key, type and label template checked, as
+    :class:`Table` merges them; ConfigError naming ``source`` and the table, key or
+    value that is wrong."""
+    _keys(data, "", source)
+    return {"render": _render(data, source),
+            "config": [_config(e, f"{source} [[config]]")
+                       for e in _tables(data, "config", source)],
+            "each_traversal": [_rule(r, "each_traversal", f"{source} [[each_traversal]]")
+                               for r in _tables(data, "each_traversal", source)],
+            "each_sorter": [_rule(r, "each_sorter", f"{source} [[each_sorter]]")
+                            for r in _tables(data, "each_sorter", source)],
+            "matrix": _matrix(data, source), "kernels": _kernels(data, source)}
+
+
+# --------------------------------------------------------------------------
+
 class Table:
     """The configuration data: explicit configurations, rules and presets."""
 
     def __init__(self, data, source="configs.toml"):
         self.source = source
-        self.render = dict(data.get("render", {}))
-        self.configs = []
-        self.each_traversal = list(data.get("each_traversal", []))
-        self.each_sorter = list(data.get("each_sorter", []))
-        self.matrix = dict(data.get("matrix", {}))
-        self.kernels = dict(data.get("kernels", {}))
-        for entry in data.get("config", []):
-            self.add(self._config(entry, f"{source} [[config]]"))
-
-    @staticmethod
-    def _config(entry, where):
-        label = _need(entry, "label", where)
-        return Config(str(label), _need(entry, "traversal", f"{where} {label!r}"),
-                      _need(entry, "sorter", f"{where} {label!r}"),
-                      baseline=str(entry.get("baseline", "")), paper=str(entry.get("paper", "")))
+        self.render, self.matrix, self.kernels = {}, {}, {}
+        self.configs, self.each_traversal, self.each_sorter = [], [], []
+        self.origin = {}        # "table.key" -> the file its value came from
+        self.extend(data, source)
 
     def add(self, config):
         """Add a configuration; one with the same label is replaced in place."""
@@ -99,14 +285,21 @@ class Table:
         self.configs.append(config)
 
     def extend(self, data, source):
-        """Merge another file's tables: its configurations replace or follow ours, its
-        rules are added, its render/matrix/kernels keys override ours."""
-        for entry in data.get("config", []):
-            self.add(self._config(entry, f"{source} [[config]]"))
-        self.each_traversal += list(data.get("each_traversal", []))
-        self.each_sorter += list(data.get("each_sorter", []))
+        """Merge another file's tables (checked first, see :func:`_check`): its
+        configurations replace or follow ours, its rules are added, its
+        render/matrix/kernels keys override ours."""
+        data = _check(data, source)
+        for config in data["config"]:
+            self.add(config)
+        self.each_traversal += data["each_traversal"]
+        self.each_sorter += data["each_sorter"]
         for name in ("render", "matrix", "kernels"):
-            getattr(self, name).update(data.get(name, {}))
+            getattr(self, name).update(data[name])
+            self.origin.update({f"{name}.{key}": source for key in data[name]})
+
+    def where(self, key):
+        """The file the value of ``key`` ("table.key") came from."""
+        return self.origin.get(key, self.source)
 
     # ------------------------------------------------------------------
     @property
@@ -156,7 +349,8 @@ class Table:
         traversals = _expand("traversals", traversals) or registry.available("traversals")
         packets = self.kernels.get("packets", {})
         if not packets:
-            raise ConfigError(f"{self.source}: [kernels.packets] names no packet layout")
+            raise ConfigError(f"{self.where('kernels.packets')}: [kernels.packets] names no "
+                              f"packet layout")
         template = self.kernels.get("label", "{traversal} / {packets}")
         configs = [Config(template.format(traversal=t, packets=p), t, spec, row=t, column=p)
                    for t in traversals for p, spec in packets.items()]
@@ -164,13 +358,9 @@ class Table:
 
     @staticmethod
     def _from_rule(rule, **names):
-        where = "configs.toml rule"
-        label = str(_need(rule, "label", where)).format(**names)
-        trav = names.get("traversal", rule.get("traversal"))
-        sorter = names.get("sorter", rule.get("sorter"))
-        if trav is None or sorter is None:
-            raise ConfigError(f"{where} {label!r}: needs a traversal and a sorter")
-        return Config(label, trav, sorter, baseline=str(rule.get("baseline", "")))
+        """The configuration a (checked) rule makes for the plugin ``names`` gives."""
+        return Config(rule["label"].format(**names), names.get("traversal", rule.get("traversal")),
+                      names.get("sorter", rule.get("sorter")), baseline=rule["baseline"])
 
 
 def _expand(kind, names):
@@ -199,7 +389,7 @@ def load_table(files=(), added=()):
     (``(label, traversal, sorter)`` triples, plugin specs as strings)."""
     table = Table(_read(DEFAULT_FILE))
     for path in files:
-        table.extend(_read(path), str(path))
+        table.extend(_read(path), f"--configs {str(path)!r}")
     for label, trav, sorter in added:
         table.add(Config(label, trav, sorter))
     return table

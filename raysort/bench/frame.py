@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from raysort import registry
 from raysort.bench.report import group_report, load_average, machine_info
 from raysort.bench.rounds import run_checked
+from raysort.errors import ConfigError, RaysortError
 from raysort.pipeline import Pipeline
 from raysort.scene import load_scene
 
@@ -47,13 +49,34 @@ class _Frame:
         return out.stats.wall_seconds
 
 
+def _shader(table, depth):
+    """The ``[render]`` shader with ``depth`` set as its ``depth_parameter``; checked
+    before any scene is loaded: ConfigError naming the file of the value that is wrong."""
+    shader = dict(table.render.get("shader", {}))
+    key = table.render.get("depth_parameter")
+    if not shader:
+        return {key: depth} if key else {}
+    source = table.where("render.shader")
+    _check_shader(shader, f"{source} [render]: ")
+    if key:
+        shader[key] = depth
+        where = table.where("render.depth_parameter")
+        _check_shader(shader, f"{where} [render]: depth_parameter {key!r}: ",
+                      "" if where == source else f"; the shader is set in {source}")
+    return shader
+
+
+def _check_shader(shader, before, after=""):
+    try:
+        registry.create("shaders", shader)
+    except RaysortError as exc:
+        raise ConfigError(f"{before}{exc}{after}") from None
+
+
 def run_frames(scene_specs, configs, table, *, width=256, height=256, spp=4, depth=2, seed=0,
                threads=1, repeat=3, order_seed=0, bvh=None, warmup=True, progress=None):
     """Run every configuration on every scene; returns a JSON-ready dict."""
-    shader = dict(table.render.get("shader", {}))
-    depth_key = table.render.get("depth_parameter")
-    if depth_key:
-        shader[depth_key] = depth
+    shader = _shader(table, depth)
     report = {"kind": "frame", "machine": machine_info(), "load": {"before": load_average()},
               "settings": {"width": width, "height": height, "spp": spp, "depth": depth,
                            "seed": seed, "threads": threads, "repeat": repeat,

@@ -9,6 +9,7 @@ spread, the image or hit check, the Table I counters and the stage times.
 """
 from __future__ import annotations
 
+import io
 import os
 import platform
 import sys
@@ -19,8 +20,8 @@ from raysort.bench.rounds import ratios, summary
 from raysort.errors import ConfigError
 from raysort.stats import COUNTER_LABELS
 
-__all__ = ["group_report", "machine_info", "load_average", "format_report", "write_chart",
-           "failures", "SCHEMA"]
+__all__ = ["SCHEMA", "chart_format", "draw_chart", "failures", "format_report", "group_report",
+           "load_average", "machine_info", "shown", "write_chart"]
 
 #: the JSON layout's name and version, written into every report
 SCHEMA = "raysort-bench/2"
@@ -141,7 +142,7 @@ def format_report(report, stream=None):
     s, m = report["settings"], report["machine"]
 
     def say(text=""):
-        print(text, file=stream)
+        print(shown(text), file=stream)
 
     what = (f"{s['width']}x{s['height']}, {s['spp']} spp, depth {s['depth']}, seed {s['seed']}"
             if report["kind"] == "frame" else
@@ -236,20 +237,57 @@ def _pyplot():
     return plt
 
 
-def write_chart(report, path):
-    """A Fig. 2 style bar chart (median seconds, min-max whiskers) per group; for a
-    matrix or kernels report, a heat map of the speedups per group instead."""
-    from raysort.output import atomic_target
+def chart_format(path):
+    """The file format a chart at ``path`` is written in, by its extension (png, pdf,
+    svg, ...); ConfigError now if matplotlib is missing or does not write that format."""
+    _pyplot()
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
 
+    formats = set(FigureCanvasAgg.get_supported_filetypes()) - {"pgf"}   # pgf needs LaTeX
+    fmt = os.path.splitext(os.fspath(path))[1][1:].lower()
+    if fmt not in formats:
+        raise ConfigError(f"--chart {os.fspath(path)!r}: the extension names the format, one "
+                          f"of .{', .'.join(sorted(formats))} (e.g. .png, .pdf or .svg)")
+    return fmt
+
+
+def draw_chart(report, fmt="png"):
+    """The chart as the bytes of a ``fmt`` file: a Fig. 2 style bar chart (median
+    seconds, min-max whiskers) per group; for a matrix or kernels report, a heat map
+    of the speedups per group instead.  Text is drawn as it is (no math mode)."""
     plt = _pyplot()
     groups = list(report["groups"])
-    if any(r["row"] for g in report["groups"].values() for r in g["configs"]):
-        fig = _heat_maps(plt, report, groups)
-    else:
-        fig = _bars(plt, report, groups)
-    with atomic_target(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=120)
-    plt.close(fig)
+    out = io.BytesIO()
+    with plt.rc_context({"text.parse_math": False, "text.usetex": False}):
+        if any(r["row"] for g in report["groups"].values() for r in g["configs"]):
+            fig = _heat_maps(plt, report, groups)
+        else:
+            fig = _bars(plt, report, groups)
+        try:
+            fig.savefig(out, format=fmt, dpi=120)
+        finally:
+            plt.close(fig)
+    return out.getvalue()
+
+
+def write_chart(report, path, data=None):
+    """Write the chart to ``path`` in the format its extension names, whole or not at
+    all; ``data``: the chart already drawn (:func:`draw_chart`)."""
+    from raysort.output import atomic_target
+
+    if data is None:
+        data = draw_chart(report, chart_format(path))
+    with atomic_target(path) as tmp, open(tmp, "wb") as fh:
+        fh.write(data)
+
+
+def shown(text):
+    """``text`` as any output takes it: the bytes of a file name that are not UTF-8
+    (held as lone surrogates) as backslash escapes."""
+    try:
+        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    except UnicodeEncodeError:
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")
 
 
 def _bars(plt, report, groups):
@@ -263,8 +301,8 @@ def _bars(plt, report, groups):
         err = np.array([[m - r["seconds"]["min"], r["seconds"]["max"] - m]
                         for m, r in zip(med, rows)]).T
         ax.bar(np.arange(len(groups)) + k * width - 0.4 + width / 2, med, width,
-               yerr=err, capsize=2, label=label, color=plt.cm.tab20(k % 20))
-    ax.set_xticks(np.arange(len(groups)), groups)
+               yerr=err, capsize=2, label=shown(label), color=plt.cm.tab20(k % 20))
+    ax.set_xticks(np.arange(len(groups)), [shown(g) for g in groups])
     ax.set_ylabel("seconds per frame, median (lower is better)")
     s = report["settings"]
     ax.set_title(f"raysort bench: {s['width']}x{s['height']}, {s['spp']} spp, depth "
@@ -282,13 +320,13 @@ def _heat_maps(plt, report, groups):
                                   lambda r: r["speedup"]["median"])
         im = ax.imshow(grid, cmap="RdYlGn", vmin=min(0.5, np.nanmin(grid)),
                        vmax=max(1.5, np.nanmax(grid)))
-        ax.set_xticks(range(len(cols)), cols, rotation=30, fontsize=7)
-        ax.set_yticks(range(len(names)), names, fontsize=7)
+        ax.set_xticks(range(len(cols)), [shown(c) for c in cols], rotation=30, fontsize=7)
+        ax.set_yticks(range(len(names)), [shown(n) for n in names], fontsize=7)
         for i in range(len(names)):
             for j in range(len(cols)):
                 if np.isfinite(grid[i, j]):
                     ax.text(j, i, f"{grid[i, j]:.2f}", ha="center", va="center", fontsize=6)
-        ax.set_title(f"{name}: speedup over baseline (median of rounds)", fontsize=8)
+        ax.set_title(f"{shown(name)}: speedup over baseline (median of rounds)", fontsize=8)
         fig.colorbar(im, ax=ax)
     fig.tight_layout()
     return fig

@@ -54,8 +54,7 @@ def test_json_keeps_every_round_and_the_orders(tmp_path, monkeypatch, capsys):
         assert [r["label"] for r in g["configs"]] == ["ranged (8x8)", "ranged + nah", "single"]
         for r in g["configs"]:
             assert len(r["rounds"]) == 2 and len(r["speedup_rounds"]) == 2
-            assert r["seconds"]["median"] == pytest.approx(sorted(r["rounds"])[0] / 2
-                                                           + sorted(r["rounds"])[1] / 2)
+            assert r["seconds"]["median"] == pytest.approx(sum(r["rounds"]) / 2)
             assert r["seconds"]["min"] == min(r["rounds"])
             assert r["speedup_rounds"] == pytest.approx(
                 [b / t for b, t in zip(g["configs"][0]["rounds"], r["rounds"])])
@@ -147,8 +146,8 @@ def test_kernels_table_every_traversal_and_layout(tmp_path, monkeypatch, capsys,
 
 
 def test_kernels_an_exact_traversal_with_other_hits_fails(tmp_path, monkeypatch, blind):
-    status, rep = bench(tmp_path, monkeypatch, "plane", "--kernels", "--workloads", "primary",
-                        "--traversals", "single,bench_blind")
+    status, _ = bench(tmp_path, monkeypatch, "plane", "--kernels", "--workloads", "primary",
+                      "--traversals", "single,bench_blind")
     assert status == 1
 
 
@@ -193,6 +192,7 @@ def test_kernels_matrix_of_sorters_and_traversals_per_workload(tmp_path, monkeyp
 def test_compared_pairs_are_per_round_ratios_too(tmp_path, monkeypatch, capsys):
     status, rep = bench(tmp_path, monkeypatch, "plane", "--only",
                         "ranged (8x8),partition (32x32),ranged + nah")
+    assert status == 0
     g = rep["groups"]["plane"]
     rows = {r["label"]: r for r in g["configs"]}
     (pair,) = [c for c in g["comparisons"] if c["label"] == "ranged + nah"]
@@ -201,3 +201,106 @@ def test_compared_pairs_are_per_round_ratios_too(tmp_path, monkeypatch, capsys):
         [p / t for p, t in zip(rows["partition (32x32)"]["rounds"],
                                rows["ranged + nah"]["rounds"])])
     assert "ranged + nah over partition (32x32):" in capsys.readouterr().out
+
+
+FAST = ["--size", "8x8", "--spp", "1", "--repeat", "1", "--no-warmup", "-q"]
+
+
+@pytest.fixture
+def nothing_runs(monkeypatch):
+    """Fail the test if a scene is loaded (a render or a timing would follow)."""
+    def load_scene(spec):
+        raise AssertionError(f"scene {spec!r} loaded")
+
+    monkeypatch.setattr("raysort.bench.frame.load_scene", load_scene)
+    monkeypatch.setattr("raysort.bench.kernels.load_scene", load_scene)
+
+
+def one_line_error(capsys, argv, *fragments):
+    """``raysort bench ARGV`` exits 2 with one stderr line holding ``fragments``."""
+    assert main(["bench", *argv]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("raysort: error: "), err
+    for fragment in fragments:
+        assert fragment in err[0], (fragment, err[0])
+
+
+@pytest.mark.parametrize("text, args, problem", [
+    ("config = [1]\n", ["--list"], "'config' must be an array of tables"),
+    ("[matrix]\nlabel = '{foo}'\n", ["--sorters", "none", "--traversals", "ranged"],
+     "[matrix]: label '{foo}' is not a valid template"),
+    ("[matrix]\nlabel = '{0}'\n", ["--sorters", "none", "--traversals", "ranged"],
+     "[matrix]: label '{0}' is not a valid template"),
+    ("[kernels]\nlabel = '{x}'\n", ["--kernels", "--traversals", "ranged"],
+     "[kernels]: label '{x}' is not a valid template"),
+    ("[kernels]\npackets = 3\n", ["--kernels", "--traversals", "ranged"],
+     "'packets' must be a table"),
+    ("[kernels]\npackets = {}\n", ["--kernels", "--traversals", "ranged"],
+     "[kernels.packets] names no packet layout"),
+    ("[render]\nshader = 3\n", ["--only", "ranged (8x8)"], "'shader' must be a name"),
+    ("[render]\nshader = 'ao'\n", ["--only", "ranged (8x8)"],
+     "configs.toml [render]: depth_parameter 'max_depth': shader 'ao' does not read"),
+    ("[render]\nshader = {type = 'nope'}\n", ["--only", "ranged (8x8)"],
+     "[render]: unknown shader 'nope'"),
+    ("[render]\ndepth_parameter = 'nope'\n", ["--only", "ranged (8x8)"],
+     "[render]: depth_parameter 'nope': shader 'lambert' does not read parameter 'nope'"),
+    ("[render]\ncompare = 'xy'\n", ["--only", "ranged (8x8)"], "'compare' must be an array"),
+    ("[render]\ncompare = [['ranged (8x8)', 'ranged + nah', 'x']]\n", ["--only", "ranged (8x8)"],
+     "'compare' must be an array"),
+])
+def test_a_bad_configs_file_is_one_line_before_anything_runs(tmp_path, monkeypatch, capsys,
+                                                             nothing_runs, text, args, problem):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "mine.toml").write_text(text)
+    one_line_error(capsys, ["cornell", *FAST, "--configs", "mine.toml", *args, "--json", "b.json"],
+                   "--configs 'mine.toml'", problem)
+    assert [p.name for p in tmp_path.iterdir()] == ["mine.toml"]
+
+
+@pytest.mark.parametrize("args, problem", [
+    (["--json", "b.json", "--chart", "b.json"], "--chart 'b.json' is the --json file 'b.json'"),
+    (["--json", "b.json", "--chart", "./b.json"], "--chart './b.json' is the --json file"),
+    (["--json", "mine.toml", "--configs", "mine.toml"], "is the --configs file 'mine.toml'"),
+    (["--json", ""], "--json: cannot write '': the path is empty"),
+    (["--chart", ""], "--chart: cannot write '': the path is empty"),
+    (["--chart", "c"], "--chart 'c': the extension names the format"),
+    (["--chart", "c.pgf"], "--chart 'c.pgf': the extension names the format"),
+    (["--baseline", ""], "unknown configuration ''"),
+])
+def test_bad_output_paths_are_one_line_before_anything_runs(tmp_path, monkeypatch, capsys,
+                                                            nothing_runs, args, problem):
+    pytest.importorskip("matplotlib")
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "mine.toml").write_text("")
+    one_line_error(capsys, ["cornell", *FAST, "--only", "ranged (8x8)", *args], problem)
+    assert [p.name for p in tmp_path.iterdir()] == ["mine.toml"]
+
+
+def test_chart_takes_the_format_its_extension_names(tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    monkeypatch.chdir(tmp_path)
+    assert main(["bench", "cornell", *FAST, "--only", "ranged (8x8)", "--chart", "c.pdf"]) == 0
+    assert (tmp_path / "c.pdf").read_bytes()[:5] == b"%PDF-"
+
+
+def test_undecodable_names_are_charted(tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    monkeypatch.chdir(tmp_path)
+    label = "\udcff $\\frac$"                 # a label from a command line that is not UTF-8
+    assert main(["bench", "cornell", *FAST, "--add", label, "ranged", "none", "--only", label,
+                 "--json", "b.json", "--chart", "c.png"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.json", "c.png"]
+
+
+def test_a_failing_chart_leaves_no_file(tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    monkeypatch.chdir(tmp_path)
+
+    def broken(*args):
+        raise RuntimeError("broken chart")
+
+    monkeypatch.setattr("raysort.bench.report._bars", broken)
+    with pytest.raises(RuntimeError, match="broken chart"):
+        main(["bench", "cornell", *FAST, "--only", "ranged (8x8)", "--json", "b.json",
+              "--chart", "c.png"])
+    assert list(tmp_path.iterdir()) == []

@@ -98,3 +98,85 @@ def test_select_keeps_the_given_order_and_names_unknown_labels():
     assert [c.label for c in select(configs, ["b", "a"])] == ["b", "a"]
     with pytest.raises(ConfigError, match="unknown configuration 'c'; known: a, b"):
         select(configs, ["c"])
+
+
+def write(tmp_path, text):
+    path = tmp_path / "mine.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("text, problem", [
+    ("config = [1]\n", "'config' must be an array of tables"),
+    ("config = 'x'\n", "'config' must be an array of tables"),
+    ("each_traversal = 3\n", "'each_traversal' must be an array of tables"),
+    ("render = 3\n", "'render' must be a table"),
+    ("render = 'abc'\n", "'render' must be a table"),
+    ("matrix = 3\n", "'matrix' must be a table"),
+    ("[render]\nshader = 3\n", "[render]: 'shader' must be a name"),
+    ("[render]\ndepth_parameter = 3\n", "[render]: 'depth_parameter' must be a string"),
+    ("[render]\ncompare = 'xy'\n", "[render]: 'compare' must be an array of [label, over"),
+    ("[render]\ncompare = [['a', 'b', 'c']]\n", "'compare' must be an array of [label, over"),
+    ("[kernels]\npackets = 3\n", "[kernels]: 'packets' must be a table"),
+    ("[kernels.packets]\nx = 3\n", "[kernels.packets]: 'x' must be a name"),
+    ("[kernels]\nworkloads = 'primary'\n", "'workloads' must be an array of workload kinds"),
+    ("[[config]]\nlabel = {a = 1}\ntraversal = 'ranged'\nsorter = 'none'\n",
+     "[[config]]: 'label' must be a string"),
+    ("[[config]]\nlabel = 'a'\ntraversal = 3\nsorter = 'none'\n",
+     "[[config]] 'a': 'traversal' must be a name"),
+    ("[[config]]\nlabel = 'a'\ntraversal = 'ranged'\nsorter = {packet_size = 3}\n",
+     "[[config]] 'a': 'sorter' must be a name"),
+    ("[[config]]\nlabel = 'a'\ntraversal = 'ranged'\nsorter = 'none:packet_size'\n",
+     "[[config]] 'a': 'sorter': cannot read 'packet_size'"),
+    ("[[each_traversal]]\nlabel = '{traversal} x'\n",
+     "[[each_traversal]] '{traversal} x': missing 'sorter'"),
+    ("[[configs]]\nlabel = 'a'\n", "unknown key 'configs'"),
+    ("[render]\nbasline = 'a'\n", "[render]: unknown key 'basline'"),
+])
+def test_wrongly_typed_tables_are_config_errors_naming_the_file(tmp_path, text, problem):
+    with pytest.raises(ConfigError) as info:
+        load_table([write(tmp_path, text)])
+    message = str(info.value)
+    assert message.startswith(f"--configs {str(tmp_path / 'mine.toml')!r}")
+    assert problem in message and "\n" not in message
+
+
+@pytest.mark.parametrize("text, problem", [
+    ("[[each_traversal]]\nlabel = '{foo}'\nsorter = 'none'\n",
+     "[[each_traversal]]: label '{foo}' is not a valid template (unknown placeholder {foo})"),
+    ("[[each_traversal]]\nlabel = '{'\nsorter = 'none'\n",
+     ("label '{' is not a valid template (Single '{' encountered in format string); it may "
+      "use {traversal}")),
+    ("[[each_sorter]]\nlabel = 'x + {traversal}'\ntraversal = 'ranged'\n",
+     "unknown placeholder {traversal}); it may use {sorter}"),
+    ("[matrix]\nlabel = '{foo}'\n", "[matrix]: label '{foo}' is not a valid template"),
+    ("[matrix]\nlabel = '{0}'\n", "(a placeholder without a name); it may use {traversal}"),
+    ("[matrix]\nlabel = '{traversal.x}'\n", "[matrix]: label '{traversal.x}' is not a valid"),
+    ("[kernels]\nlabel = '{x}'\n", "it may use {traversal} and {packets}"),
+])
+def test_label_templates_are_checked_when_the_file_is_read(tmp_path, text, problem):
+    with pytest.raises(ConfigError, match="mine.toml") as info:
+        load_table([write(tmp_path, text)])
+    assert problem in str(info.value)
+
+
+def test_kernels_packets_error_names_the_file_it_came_from(tmp_path):
+    with pytest.raises(ConfigError, match=r"mine\.toml'?: \[kernels.packets\] names no packet"):
+        load_table([write(tmp_path, "[kernels]\npackets = {}\n")]).kernel_configs()
+
+
+def test_shader_may_be_a_spec_string(tmp_path):
+    table = load_table([write(tmp_path, "[render]\nshader = 'ao:samples=2'\n")])
+    assert table.render["shader"] == {"type": "ao", "samples": 2}
+    assert table.where("render.shader") == f"--configs {str(tmp_path / 'mine.toml')!r}"
+    assert table.where("render.baseline") == "configs.toml"
+
+
+def test_unreadable_toml_is_a_config_error(tmp_path):
+    path = tmp_path / "mine.toml"
+    path.write_bytes(b"label = '\xff'\n")
+    with pytest.raises(ConfigError, match="not valid TOML .not UTF-8 text."):
+        load_table([path])
+    path.write_text("a = " + "[" * 5000 + "]" * 5000 + "\n")
+    with pytest.raises(ConfigError, match="not valid TOML .nested too deeply."):
+        load_table([path])

@@ -4,7 +4,13 @@ import io
 import pytest
 
 from raysort.bench.configs import Config
-from raysort.bench.report import failures, format_report, group_report, pivot
+from raysort.bench.report import (
+    failures,
+    format_report,
+    group_report,
+    pivot,
+    write_chart,
+)
 from raysort.stats import Counters
 
 SECONDS = [[2.0, 1.0, 4.0], [3.0, 1.0, 5.0], [2.0, 2.0, 2.0]]   # rounds x configurations
@@ -36,7 +42,7 @@ def report(group):
 def test_rows_hold_every_round_medians_and_per_round_speedups():
     g = group_report(CONFIGS, SECONDS, [[0, 1, 2], [2, 1, 0], [1, 0, 2]], rows(),
                      compare=[("odd", "fast"), ("missing", "base")])
-    base, fast, odd = g["configs"]
+    _, fast, odd = g["configs"]
     assert g["orders"] == [["base", "fast", "odd"], ["odd", "fast", "base"],
                            ["fast", "base", "odd"]]
     assert fast["rounds"] == [1.0, 1.0, 2.0]
@@ -98,3 +104,38 @@ def test_pivot_grid_of_rows_and_columns():
     assert (names, cols) == (["t1", "t2"], ["a", "b"])
     assert grid[0].tolist() == [1.0, 0.5] and grid[1, 1] == 0.25
     assert grid[1, 0] != grid[1, 0]                    # no t2 + a: NaN
+
+
+def chart_report(name, labels):
+    """A one-group frame report, ``name`` its scene and ``labels`` its configurations."""
+    configs = [Config(label, "single", "none", baseline=labels[0]) for label in labels]
+    g = group_report(configs, [[1.0 + k for k in range(len(labels))]], [list(range(len(labels)))],
+                     rows()[:len(labels)])
+    rep = report(g)
+    rep["groups"] = {name: rep["groups"]["sibenik"]}
+    return rep
+
+
+@pytest.mark.parametrize("name, magic", [("c.png", b"\x89PNG\r\n\x1a\n"), ("c.pdf", b"%PDF"),
+                                         ("c.svg", b"<?xml")])
+def test_chart_is_written_in_the_format_its_extension_names(tmp_path, name, magic):
+    pytest.importorskip("matplotlib")
+    write_chart(chart_report("plane", ["a", "b"]), tmp_path / name)
+    assert (tmp_path / name).read_bytes().startswith(magic)
+    assert [p.name for p in tmp_path.iterdir()] == [name]
+
+
+def test_chart_draws_undecodable_names_and_dollars_as_they_are(tmp_path):
+    pytest.importorskip("matplotlib")
+    rep = chart_report("\udcff.ply", ["a \udcff", "$\\frac$"])      # a file name not UTF-8
+    write_chart(rep, tmp_path / "c.svg")
+    svg = (tmp_path / "c.svg").read_text()
+    assert "\\xff.ply" in svg and "$\\frac$" in svg
+
+
+def test_text_shows_undecodable_names_as_escapes():
+    out = io.StringIO()
+    format_report(chart_report("\udcff.ply", ["a \udcff", "b"]), out)
+    text = out.getvalue()
+    assert "\\xff.ply (10 triangles" in text and "a \\xff" in text
+    assert "\udcff" not in text
