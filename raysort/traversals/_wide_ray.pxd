@@ -59,6 +59,8 @@ cdef inline void trace_wide_rays(const wide_node *nodes, const rs_tri8 *groups8,
                 while mask:
                     k = rs_lowest_bit(mask)
                     mask &= mask - 1
+                    if n.child[k] == 0:            # an empty slot (types.h)
+                        continue
                     child.ref, child.count, child.entry = n.child[k], n.count[k], entry[k]
                     insert_nearest_first(hit, m, child)
                     m += 1

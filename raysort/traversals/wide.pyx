@@ -40,7 +40,7 @@ cdef void trace_wide(const Geometry *g, rs_rays *r, int start, int count, int an
                 mask = rs_node4_hit(r, i, n, entry)
                 m = 0                              # the children hit, nearest first
                 for k in range(4):
-                    if mask >> k & 1:
+                    if mask >> k & 1 and n.child[k] != 0:     # child 0: an empty slot
                         child.ref, child.count, child.entry = n.child[k], n.count[k], entry[k]
                         insert_nearest_first(hit, m, child)
                         m += 1

@@ -378,10 +378,12 @@ RS_INLINE void rs_frustum_walk(const rs_node8 *nodes, const rs_tri8 *groups, rs_
             const rs_node8 *n = &nodes[top.ref];
             c->ia += 1;
             int mask = rs_frustum_node8(b, n, entry), m = 0;
-            for (; mask; mask &= mask - 1, ++m) {
+            for (; mask; mask &= mask - 1) {
                 int k = rs_lowest(mask);
+                if (!n->child[k])               /* an empty slot (types.h) */
+                    continue;
                 rs_frustum_entry child = {n->child[k], n->count[k], top.ref, k, entry[k]};
-                rs_frustum_insert(hit, m, child);
+                rs_frustum_insert(hit, m++, child);
             }
             for (int k = m - 1; k >= 0; --k) {  /* the nearest is popped first */
                 stack[sp++] = hit[k];

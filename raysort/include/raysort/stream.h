@@ -408,9 +408,11 @@ RS_INLINE void rs_stream_single4(const rs_node4 *nodes, const rs_tri *tris, rs_r
             const rs_node4 *n = &nodes[ref];
             c->box4 += 1;
             int mask = rs_node4_hit(r, i, n, entry), m = 0;
-            for (; mask; mask &= mask - 1, ++m) {
+            for (; mask; mask &= mask - 1) {
                 int k = rs_lowest(mask);
-                rs_stream_insert(hit, m, n->child[k], n->count[k], entry[k]);
+                if (!n->child[k])               /* an empty slot (types.h) */
+                    continue;
+                rs_stream_insert(hit, m++, n->child[k], n->count[k], entry[k]);
                 rs_stream_prefetch(n->child[k] >= 0 ? (const void *)&nodes[n->child[k]]
                                    : (const void *)&tris[-n->child[k] - 1], 2);
             }
@@ -452,9 +454,10 @@ RS_INLINE void rs_stream_single8(const rs_node8 *nodes, const rs_tri8 *groups, r
             const rs_node8 *n = &nodes[ref];
             c->box4 += 1;
             int mask = rs_node8_hit(r, i, &ray, n, entry), m = 0;
-            for (; mask; mask &= mask - 1, ++m) {
+            for (; mask; mask &= mask - 1) {
                 int k = rs_lowest(mask);
-                rs_stream_insert(hit, m, n->child[k], n->count[k], entry[k]);
+                if (n->child[k])                /* not an empty slot (types.h) */
+                    rs_stream_insert(hit, m++, n->child[k], n->count[k], entry[k]);
             }
             for (int k = m - 1; k > 0; --k) {   /* farther children wait, farthest deepest */
                 stack[sp++] = hit[k];

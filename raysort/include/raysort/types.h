@@ -78,7 +78,11 @@ typedef struct rs_node {
  * traversal): 128 bytes, child boxes stored structure-of-arrays so one SSE
  * operation tests a ray against all four.  child[k] >= 0 is an inner node,
  * child[k] < 0 a leaf whose triangles are [-child[k] - 1, ... + count[k]);
- * an empty slot has lo = +inf, hi = -inf, so no ray ever enters it. */
+ * an empty slot has lo = +inf, hi = -inf, so no ray ever enters it, and child 0
+ * (the root, no node's child).  A traversal skips a child 0 whatever its box
+ * test says: a ray of hand-edited packet values (1 / d = 0
+ * where d is not 0) can pass an empty box, as (inf - o) * 0 is NaN and the
+ * test's max drops NaN, and would go back to the root again and again. */
 typedef struct rs_node4 {
     float lo[3][4];     /* lo[axis][child] */
     float hi[3][4];     /* hi[axis][child] */
