@@ -218,7 +218,7 @@ cdef int lanes_kernel(const int32_t *prim, const int32_t *index, const float *tm
 
 cdef int index_lanes_kernel(const int32_t *prim, const int32_t *index, const int32_t *starts,
                             const int32_t *counts, Py_ssize_t n_sub, const int32_t *order,
-                            const int32_t *offsets, Py_ssize_t capacity,
+                            Py_ssize_t n_order, const int32_t *offsets, Py_ssize_t capacity,
                             Py_ssize_t *where) noexcept nogil:
     """Sub-packet k still starts and ends where the gather put it (from ``offsets``: its
     rays padded to a multiple of 4 lanes) and each of its lanes holds
@@ -226,12 +226,13 @@ cdef int index_lanes_kernel(const int32_t *prim, const int32_t *index, const int
     hold no ray is left to :func:`lanes_kernel`'s pass over all lanes: as the rays'
     lanes hold n rays (order's values are rays, checked by the gather), the padding is
     untouched exactly when n lanes in all hold a ray and every lane holding none has
-    prim -1."""
+    prim -1.  Offsets outside ``order`` (``n_order`` values) are a BAD_LAYOUT."""
     cdef Py_ssize_t k, j, s, c, next_start = 0
     for k in range(n_sub):
         s, c = next_start, offsets[k + 1] - offsets[k]
         next_start = s + ((c + 3) & ~3)
-        if starts[k] != s or counts[k] != c or next_start > capacity:
+        if (starts[k] != s or counts[k] != c or next_start > capacity or c < 0
+                or offsets[k] < 0 or offsets[k + 1] > n_order):
             where[0] = k
             return BAD_LAYOUT
         if memcmp(index + s, order + offsets[k], c * sizeof(int32_t)):
@@ -274,13 +275,14 @@ def hits(const float[:, ::1] rows not None, const float[::1] t0 not None,
             or u.shape[0] != capacity or v.shape[0] != capacity
             or index.shape[0] != capacity or t0.shape[0] != capacity):
         return BAD_SHAPE, 0
-    if starts.shape[0] != offsets.shape[0] - 1 or counts.shape[0] != starts.shape[0]:
+    if (offsets.shape[0] < 1 or starts.shape[0] != offsets.shape[0] - 1
+            or counts.shape[0] != starts.shape[0]):
         return BAD_LAYOUT, 0
     with nogil:
         code = index_lanes_kernel(&prim[0], &index[0], &starts[0] if starts.shape[0] else NULL,
                                   &counts[0] if counts.shape[0] else NULL, starts.shape[0],
-                                  &order[0] if order.shape[0] else NULL, &offsets[0], capacity,
-                                  &where)
+                                  &order[0] if order.shape[0] else NULL, order.shape[0],
+                                  &offsets[0], capacity, &where)
         if not code:
             code = lanes_kernel(&prim[0], &index[0], &rows[RS_PACKET_TMIN, 0],
                                 &rows[RS_PACKET_T, 0], &t0[0], &u[0], &v[0], capacity,

@@ -292,11 +292,18 @@ def scatter(const float[:, ::1] rows, const int32_t[::1] prim, const float[::1] 
             const float[::1] v, const int32_t[::1] index, float[::1] t_out,
             int32_t[::1] prim_out, float[::1] u_out, float[::1] v_out):
     """Every lane's hit to its ray ``index[lane]`` (-1: none); False, with nothing more
-    written, at a lane whose index is beyond the outputs."""
+    written, at a lane whose index is beyond the outputs.  ValueError if the lanes'
+    arrays or the outputs differ in length."""
     cdef Py_ssize_t s
     cdef int32_t i
     cdef uint32_t n = t_out.shape[0]
     cdef bint ok = True
+    if (rows.shape[0] <= RS_PACKET_T or rows.shape[1] < index.shape[0]
+            or prim.shape[0] < index.shape[0] or u.shape[0] < index.shape[0]
+            or v.shape[0] < index.shape[0] or prim_out.shape[0] != n or u_out.shape[0] != n
+            or v_out.shape[0] != n):
+        raise ValueError("scatter: the packets' rows, prim, u and v must hold every lane of "
+                         "index, and the hits' t, prim, u and v one value per ray")
     with nogil:
         for s in range(index.shape[0]):
             i = index[s]
@@ -319,10 +326,13 @@ def scatter(const float[:, ::1] rows, const int32_t[::1] prim, const float[::1] 
 
 
 def scatter_occluded(const int32_t[::1] prim, const int32_t[::1] index, unsigned char[::1] out):
-    """``out[index[lane]]``: the lane found a hit; False at an index beyond ``out``."""
+    """``out[index[lane]]``: the lane found a hit; False at an index beyond ``out``.
+    ValueError if ``prim`` holds fewer lanes than ``index``."""
     cdef Py_ssize_t s
     cdef uint32_t n = out.shape[0]
     cdef bint ok = True
+    if prim.shape[0] < index.shape[0]:
+        raise ValueError("scatter_occluded: prim must hold every lane of index")
     with nogil:
         for s in range(index.shape[0]):
             if index[s] >= 0:

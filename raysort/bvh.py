@@ -31,7 +31,7 @@ from raysort.rays import aligned_empty
 
 __all__ = ["BVH", "Wide8", "Wide16", "PRESETS", "NODE_DTYPE", "NODE4_DTYPE", "NODE8_DTYPE",
            "NODE16_DTYPE", "TRI_DTYPE", "TRI8_DTYPE", "prepare_triangles", "degenerate_faces",
-           "frozen"]
+           "frozen", "check_tree"]
 
 #: named sets of build parameters (``BVH(..., preset="manta")``, ``bvh={"preset": "manta"}``,
 #: ``raysort bench --bvh manta``); parameters given next to a preset override it.
@@ -230,8 +230,8 @@ class BVH:
     def wide(self):
         with self._wide_lock:
             if self._wide is None:
-                out = aligned_empty((len(self.nodes),), NODE4_DTYPE)
-                n, self._wide_depth = _bvh.collapse(self.nodes.view(np.uint8).reshape(-1),
+                out = aligned_empty((len(self._nodes),), NODE4_DTYPE)
+                n, self._wide_depth = _bvh.collapse(self._nodes.view(np.uint8).reshape(-1),
                                                     out.view(np.uint8).reshape(-1))
                 self._wide = frozen(out[:n])
             return self._wide
@@ -239,20 +239,20 @@ class BVH:
     @property
     def wide_depth(self):
         """Levels of the 4-wide tree (:attr:`wide`)."""
-        self.wide  # noqa: B018 (collapsed on first use)
+        BVH.wide.fget(self)     # collapsed on first use
         return self._wide_depth
 
     @property
     def wide8(self):
         with self._wide_lock:
             if self._wide8 is None:
-                self._wide8 = self.collapse8()
+                self._wide8 = BVH.collapse8(self)     # this class's: from its own tree
             return self._wide8
 
     @property
     def wide16(self):
         """The 8-wide tree widened to 16-wide nodes (:class:`Wide16`), built on first use."""
-        wide8 = self.wide8
+        wide8 = BVH.wide8.fget(self)
         with self._wide_lock:
             if self._wide16 is None or self._wide16.groups is not wide8.groups:
                 start = time.perf_counter()
@@ -271,18 +271,18 @@ class BVH:
         max_leaf = integer("max_leaf", self.WIDE8_MAX_LEAF if max_leaf is None else max_leaf,
                            1, 65535 * 8)
         start = time.perf_counter()
-        n_leaves = int((self.nodes["count"] > 0).sum())
-        nodes = aligned_empty((len(self.nodes),), NODE8_DTYPE, 64)
-        groups = aligned_empty((len(self.triangles) // 8 + n_leaves + 1,), TRI8_DTYPE, 64)
+        n_leaves = int((self._nodes["count"] > 0).sum())
+        nodes = aligned_empty((len(self._nodes),), NODE8_DTYPE, 64)
+        groups = aligned_empty((len(self._triangles) // 8 + n_leaves + 1,), TRI8_DTYPE, 64)
         n, n_groups, depth, sah = _bvh.collapse8(
-            self.nodes.view(np.uint8).reshape(-1), self.triangles.view(np.uint8).reshape(-1),
+            self._nodes.view(np.uint8).reshape(-1), self._triangles.view(np.uint8).reshape(-1),
             nodes.view(np.uint8).reshape(-1), groups.view(np.uint8).reshape(-1),
             1.0, group_cost, max_leaf)
         return Wide8(frozen(nodes[:n]), frozen(groups[:n_groups]), depth, sah,
                      time.perf_counter() - start)
 
     def _update_bounds(self):
-        self._bounds = frozen(np.stack([self.nodes[0]["lo"], self.nodes[0]["hi"]])
+        self._bounds = frozen(np.stack([self._nodes[0]["lo"], self._nodes[0]["hi"]])
                               .astype(np.float32))
 
     def refit(self, vertices):
@@ -292,9 +292,9 @@ class BVH:
         of its triangles' whole boxes (the cuts are not redone): conservative, so
         every hit stays exact, but the tree loses what the cuts gained; build a new
         BVH after large motions."""
-        vertices, faces = check_mesh(vertices, self.faces)
-        nodes, triangles = self.nodes.copy(), self.triangles.copy()
-        _bvh.refit(vertices, faces, self.order, nodes.view(np.uint8).reshape(-1),
+        vertices, faces = check_mesh(vertices, self._faces)
+        nodes, triangles = self._nodes.copy(), self._triangles.copy()
+        _bvh.refit(vertices, faces, self._order, nodes.view(np.uint8).reshape(-1),
                    triangles.view(np.uint8).reshape(-1))
         self._vertices, self._nodes, self._triangles = (frozen(vertices), frozen(nodes),
                                                         frozen(triangles))
@@ -327,3 +327,24 @@ class BVH:
     def __repr__(self):
         return (f"BVH(triangles={len(self.faces)}, references={self.references}, "
                 f"nodes={len(self.nodes)}, depth={self.depth})")
+
+
+#: what the traversals read of a BVH: a subclass may add to a BVH, not redefine these
+_TREE = ("nodes", "triangles", "order", "depth", "bounds", "vertices", "faces", "wide",
+         "wide_depth", "wide8", "wide16", "collapse8", "__getattribute__")
+
+
+def check_tree(bvh):
+    """``bvh`` if a traversal may read it: a :class:`BVH` whose tree is the one it
+    built.  A subclass may add to a BVH but not redefine what traversals read (the tree
+    is checked when built, not at every call); ConfigError otherwise."""
+    if not isinstance(bvh, BVH):
+        raise ConfigError(f"bvh must be a raysort.BVH, got {type(bvh).__name__}")
+    cls = type(bvh)
+    if cls is not BVH:
+        for name in _TREE:
+            if getattr(cls, name) is not getattr(BVH, name):
+                raise ConfigError(f"{cls.__name__} redefines BVH.{name}: a traversal reads "
+                                  f"the tree BVH built, which a subclass may not replace")
+    return bvh
+

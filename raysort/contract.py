@@ -251,7 +251,7 @@ def check_sort(plugin, result, n, packets):
     """
     fail = _failer("sorters", plugin)
     order, offsets = sort_arrays(plugin, result, n)
-    packets = np.ascontiguousarray(packets, dtype=np.int32)
+    packets = check_packets(packets, n)
     code, where = _kernels().sort_result(order, offsets, packets, n, MAX_PACKET,
                                          is_identity_order(order))
     if code in (_BAD.BAD_OFFSETS_START, _BAD.BAD_OFFSETS_END, _BAD.BAD_OFFSETS_RANGE):
@@ -298,6 +298,13 @@ def check_hits(plugin, packets, before, order, offsets, n_prim, any_hit):
     """
     fail = _failer("traversals", plugin)
     arrays, t0 = before
+    order = _index_array(order, "check_hits: order", _config_fail)
+    offsets = _index_array(offsets, "check_hits: offsets", _config_fail)
+    if (len(offsets) == 0 or offsets[0] != 0 or offsets[-1] != len(order)
+            or (np.diff(offsets) < 0).any()):
+        raise ConfigError("check_hits: offsets must run from 0 to len(order) without "
+                          "decreasing: the sorter's result the packets were gathered by")
+    order, offsets = order.astype(np.int32, copy=False), offsets.astype(np.int32, copy=False)
     check_packet_arrays(plugin, packets, arrays)
     rows, prim, u, v, index, starts, counts = arrays
     code, lane = _kernels().hits(rows, t0, prim, u, v, index, starts, counts, order, offsets,

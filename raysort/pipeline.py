@@ -627,8 +627,8 @@ class Pipeline:
                 stats.rays[depth] = stats.rays.get(depth, 0) + len(rays)
                 total = stats.depth_counters(depth)
                 total += counters
-                if tap is not None:
-                    tap(Traced(tile, depth, False, rays, packets, hits, paths))
+                if tap is not None:     # its own packets: the next bounce's come from these
+                    tap(Traced(tile, depth, False, rays, packets.copy(), hits, paths))
                 clock.lap(None)
                 bounce = contract.call_plugin("shaders", self.shader, "shade", self.scene, rays,
                                               hits, paths, depth, seed, radiance)

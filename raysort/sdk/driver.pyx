@@ -11,6 +11,7 @@ from libc.stdint cimport int32_t, uint8_t
 from raysort._types cimport (rs_node, rs_tri, rs_rays, rs_counters, RS_MAX_PACKET,
                              RS_PACKET_ROWS, rays_view)
 
+from raysort.bvh import check_tree
 from raysort.errors import PluginContractError
 from raysort.stats import Counters
 
@@ -74,6 +75,7 @@ cdef object run(const Kernel *kernel, object bvh, object packets, bint any_hit,
     ``tree`` and ``leaves`` (C-contiguous arrays the caller keeps alive, e.g.
     ``bvh.wide``) are handed to the kernel as ``Geometry.tree`` and ``.leaves``.
     """
+    check_tree(bvh)
     cdef int widest = check_packet_layout(packets)
     cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
     cdef const uint8_t[::1] node_bytes = bvh.nodes.view("u1").reshape(-1)

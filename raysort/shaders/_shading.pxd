@@ -48,21 +48,24 @@ cdef extern from "raysort/lanes.h" nogil:
                            int k, float *const *out)
 
 
-cdef inline Py_ssize_t checked_hits(str shader, const float[:, ::1] rays, const float[::1] t,
+cdef inline Py_ssize_t checked_hits(str shader, Py_ssize_t n_rays, const float[:, ::1] rays,
+                                    const float[::1] t,
                                     const int32_t[::1] prim, const int32_t[::1] pixel,
                                     const int32_t[::1] sample, const int32_t[::1] slot,
                                     const float[:, ::1] thr, Py_ssize_t n_faces,
                                     const double[:, ::1] radiance) except -1:
     """How many of the n rays hit something, after checking what a shader's kernel reads
     (its caller's input, so a shader called from a script cannot read or write outside
-    its arrays): the hits' and paths' arrays hold the n rays, every ``prim`` is -1 or a
+    its arrays): the batch (``n_rays``, its rows ``rays``), the hits' and the paths'
+    arrays hold the same n rays, every ``prim`` is -1 or a
     face of the scene (fewer than ``n_faces``) and every ``slot`` a row of ``radiance``.
     ValueError, naming the shader and the argument, otherwise.  One pass over prim and
     slot, the one that counts the hits."""
     cdef Py_ssize_t i, n = prim.shape[0], rows = radiance.shape[0], hits = 0
     cdef int bad = 0
-    if rays.shape[0] < RS_RAY_TMAX + 1 or rays.shape[1] < n:
-        raise ValueError(f"{shader}: the rays' rows must hold the {n} rays of hits.prim")
+    if rays.shape[0] < RS_RAY_TMAX + 1 or rays.shape[1] < n or n_rays != n:
+        raise ValueError(f"{shader}: the batch of {n_rays} rays must hold the {n} rays of "
+                         f"hits.prim")
     if t.shape[0] != n or pixel.shape[0] != n or sample.shape[0] != n or slot.shape[0] != n \
             or thr.shape[0] != 3 or thr.shape[1] != n:
         raise ValueError(f"{shader}: hits.t and paths.pixel, sample, slot and throughput "

@@ -135,17 +135,17 @@ class AOShader(Shader):
         if self._prepared is None or self._prepared[0] is not scene:
             self.prepare(scene)
         _, normals, distance = self._prepared
-        checked_hits("ao", rays.data, hits.t, hits.prim, paths.pixel, paths.sample, paths.slot,
-                     paths.throughput, len(normals), radiance)
-        n = len(rays)
-        m_max = n * self.samples
+        n_hit = checked_hits("ao", len(rays), rays.data, hits.t, hits.prim, paths.pixel,
+                             paths.sample, paths.slot, paths.throughput, len(normals), radiance)
+        samples = integer("samples", self.samples, 1, MAX_SAMPLES)     # a script may set it
+        m_max = n_hit * samples                 # at most `samples` rays per hit
         ao_rays = RayBatch._unfilled(m_max)      # _ao writes every row of its rays
         ao_parent = np.empty(m_max, dtype=np.int32)
         ao_slot = np.empty(m_max, dtype=np.int32)
         ao_weight = np.empty((3, m_max), dtype=np.float32)
         m = isa.module("shaders.ao")._ao(
             rays.data, hits.t, hits.prim, normals, paths.pixel, paths.sample, paths.slot,
-            paths.throughput, self.samples, distance, self.background, seed & 0xFFFFFFFF,
+            paths.throughput, samples, distance, self.background, seed & 0xFFFFFFFF,
             radiance, ao_rays.data, ao_parent, ao_slot, ao_weight)
         shadow = None
         if m:

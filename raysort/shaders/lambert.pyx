@@ -477,8 +477,8 @@ class LambertShader(Shader):
         _, faces, emitters, light_pos, light_int = self._prepared
         # the rays that make new ones (each at most one bounce ray and one shadow ray
         # per light, so the new batches are made no larger), the inputs checked
-        n_hit = checked_hits("lambert", rays.data, hits.t, hits.prim, paths.pixel, paths.sample,
-                             paths.slot, paths.throughput, len(faces), radiance)
+        n_hit = checked_hits("lambert", len(rays), rays.data, hits.t, hits.prim, paths.pixel,
+                             paths.sample, paths.slot, paths.throughput, len(faces), radiance)
         k_max = n_hit if depth < self.max_depth else 0  # the last depth makes no bounce
         next_rays = RayBatch._unfilled(k_max)    # _shade writes every row of its rays
         next_parent = np.empty(k_max, dtype=np.int32)

@@ -22,7 +22,8 @@ from raysort._types cimport rs_minf, rs_maxf, RS_RAY_OX, RS_RAY_DX, RS_RAY_DY, R
 import numpy as np
 
 from raysort import isa
-from raysort.sdk import MAX_PACKET, ConfigError, Sorter, fixed_packets, integer, number
+from raysort.sdk import (MAX_PACKET, ConfigError, Sorter, check_packets, fixed_packets,
+                         integer, number)
 
 cdef extern from *:
     """
@@ -230,30 +231,37 @@ class NahSorter(Sorter):
     trusted = True
 
     def __init__(self, *, threshold=0.25, max_cells=8, packet_size=64, large_packet=None):
-        self.threshold = number("threshold", threshold, 0)
+        self.threshold, self.max_cells, self.packet_size, self.large_packet = \
+            threshold, max_cells, packet_size, large_packet
+        self.threshold, self.max_cells, self.packet_size, self.large_packet = self._params()
+
+    def _params(self):
+        """The parameters, checked (again at every sort: the kernel's bounds rest on
+        them, and a script may have set an attribute since)."""
+        max_cells = self.max_cells
         if isinstance(max_cells, bool) or max_cells not in (1, 2, 4, 8):
             raise ConfigError(f"max_cells must be 1, 2, 4 or 8, got {max_cells!r}")
-        self.max_cells = int(max_cells)
-        self.packet_size = integer("packet_size", packet_size, 1, MAX_PACKET)
-        self.large_packet = (None if large_packet is None else
-                             integer("large_packet", large_packet, 1, MAX_PACKET))
+        return (number("threshold", self.threshold, 0), int(max_cells),
+                integer("packet_size", self.packet_size, 1, MAX_PACKET),
+                None if self.large_packet is None else
+                integer("large_packet", self.large_packet, 1, MAX_PACKET))
 
-    def _packets(self, packets):
-        packets = np.ascontiguousarray(packets, dtype=np.int32)
-        if self.large_packet is not None:
-            packets = fixed_packets(packets, self.large_packet)
-        return packets
+    def _packets(self, packets, n):
+        """The large packets of ``n`` rays, checked, cut to ``large_packet``."""
+        packets = check_packets(packets, n)
+        large_packet = self._params()[3]
+        return packets if large_packet is None else fixed_packets(packets, large_packet)
 
     def _run(self, rays, packets, bounds, bucket=None, cell=None):
-        packets = self._packets(packets)
+        threshold, max_cells, packet_size, _ = self._params()
+        packets = self._packets(packets, len(rays))
         bounds = np.asarray(bounds, dtype=np.float32)
         extent = np.ascontiguousarray(bounds[1] - bounds[0], dtype=np.float32)
         n = len(rays)
         order = np.empty(max(n, 1), dtype=np.int32)
         offsets = np.empty(n + 1, dtype=np.int32)
-        n_sub = isa.module("sorters.nah")._sort(rays.data, packets, extent, self.threshold,
-                      self.max_cells.bit_length() - 1, self.packet_size, order, offsets,
-                      bucket, cell)
+        n_sub = isa.module("sorters.nah")._sort(rays.data, packets, extent, threshold,
+                      max_cells.bit_length() - 1, packet_size, order, offsets, bucket, cell)
         return order[:n], offsets[:n_sub + 1].copy()
 
     def sort(self, rays, packets, bounds):

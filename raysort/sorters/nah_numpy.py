@@ -30,7 +30,7 @@ class NahNumpySorter(NahSorter):
     trusted = False
 
     def classify(self, rays, packets, bounds):
-        packets = self._packets(packets)
+        packets = self._packets(packets, len(rays))
         f32 = np.float32
         o, d = rays.origins, rays.directions
         n = len(rays)
@@ -75,7 +75,7 @@ class NahNumpySorter(NahSorter):
         return bucket.astype(np.uint8), cell.astype(np.uint8)
 
     def sort(self, rays, packets, bounds):
-        packets = self._packets(packets)
+        packets = self._packets(packets, len(rays))
         bucket, cell = self.classify(rays, packets, bounds)
         packet = np.repeat(np.arange(len(packets) - 1), np.diff(packets))
         key = packet * 192 + bucket.astype(np.int64) * 8 + cell

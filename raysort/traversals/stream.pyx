@@ -38,6 +38,7 @@ from raysort.sdk.driver cimport check_packet_layout
 import numpy as np
 
 from raysort import isa
+from raysort.bvh import check_tree
 from raysort.sdk import ConfigError, Counters, Traversal, boolean, choice, integer
 
 
@@ -101,11 +102,16 @@ def lanes():
 
 
 def _tree(bvh, int width):
-    """``(nodes, leaves, depth)`` of the 8-wide or the 4-wide tree of ``bvh``."""
+    """``(nodes, leaves, depth)`` of the 8-wide or the 4-wide tree of ``bvh``; the
+    kernels take no other width (checked at every call: a script may have set the
+    plugin's ``tree`` since it was made)."""
+    check_tree(bvh)
     if width == 8:
         tree8 = bvh.wide8
         return tree8.nodes, tree8.groups, tree8.depth
-    return bvh.wide, bvh.triangles, bvh.wide_depth
+    if width == 4:
+        return bvh.wide, bvh.triangles, bvh.wide_depth
+    raise ConfigError(f"tree must be 4 or 8; got {width!r}")
 
 
 cdef _counters(const rs_counters *c, const rs_stream_scratch *w, long long active):
