@@ -231,12 +231,20 @@ def test_reading_the_batch_refuses_an_order_beyond_the_rays(soup):
             assert not order_ok or (wrong is not None and k0 == 1), (wrong, offsets, k0)
 
 
-def test_reading_the_batch_flags_a_hit_beyond_the_mesh(soup):
+def short_mesh(monkeypatch, bvh, faces):
+    """A stand-in for ``bvh`` whose mesh has only ``faces`` faces: the kernel's own check
+    of each hit it writes, which ``check_tree`` (a genuine BVH's tree and mesh agree)
+    keeps any caller from needing, is reached only with check_tree out of the way."""
+    from types import SimpleNamespace
+    monkeypatch.setattr(isa.module("traversals.stream"), "check_tree", lambda tree: tree)
+    return SimpleNamespace(faces=bvh.faces[:faces], triangles=bvh.triangles, wide8=bvh.wide8)
+
+
+def test_reading_the_batch_flags_a_hit_beyond_the_mesh(soup, monkeypatch):
     """Each hit is checked as it is written: a BVH whose mesh is shorter than its triangle
     ids makes the kernel report a hit (the rules of check_hits: prim below n_prim)."""
-    from types import SimpleNamespace
     V, F, bvh, rays, ref = soup
-    short = SimpleNamespace(faces=bvh.faces[:10], triangles=bvh.triangles, wide8=bvh.wide8)
+    short = short_mesh(monkeypatch, bvh, 10)
     out = np.empty((4, len(rays)), np.float32)
     _, _, bad_hit, order_ok = raysort.create("traversals", "stream")._intersect_batch(
         short, rays.data, np.arange(len(rays), dtype=np.int32),
@@ -245,12 +253,12 @@ def test_reading_the_batch_flags_a_hit_beyond_the_mesh(soup):
 
 
 @pytest.mark.parametrize("reverse", [False, True])
-def test_coherent_chunks_flag_the_first_hit_beyond_the_mesh(each_isa, sibenik, reverse):
+def test_coherent_chunks_flag_the_first_hit_beyond_the_mesh(each_isa, sibenik, reverse,
+                                                           monkeypatch):
     """Camera rays, whose chunks take the frustum walk: the ``none`` order's consecutive
     rays have their hits written a row at a time, a chunk-reversed order's one by one.
     With a mesh shorter than the tree's ids, the first hit beyond it in the sorter's
     order is the one reported, either way, and every other hit is brute force's."""
-    from types import SimpleNamespace
     rays = camera_rays(sibenik, 64, 64)[0].rays
     n = len(rays)
     ref = brute_force(sibenik.vertices, sibenik.faces, rays)
@@ -259,7 +267,7 @@ def test_coherent_chunks_flag_the_first_hit_beyond_the_mesh(each_isa, sibenik, r
     if reverse:
         order = np.ascontiguousarray(order.reshape(-1, 64)[:, ::-1].ravel())
     bvh = sibenik.bvh()
-    short = SimpleNamespace(faces=bvh.faces[:limit], triangles=bvh.triangles, wide8=bvh.wide8)
+    short = short_mesh(monkeypatch, bvh, limit)
     out = np.empty((4, n), np.float32)
     counters, _, bad_hit, order_ok = raysort.create("traversals", "stream")._intersect_batch(
         short, rays.data, order, np.arange(0, n + 1, 64, dtype=np.int32), 0, n // 64, False,
