@@ -109,3 +109,22 @@ def triangle_soup(rng, m=600):
     V = (centres + rng.normal(size=(m, 3, 3)) * rng.choice([0.05, 0.5, 2.0], (m, 1, 1)))
     V[: m // 5, :, 1] = 3.0
     return V.reshape(-1, 3).astype(np.float32), np.arange(3 * m, dtype=np.int32).reshape(m, 3)
+
+
+def run(capsys, *argv):
+    """``raysort.cli.main(argv)`` in process -> (exit code, stdout, stderr)."""
+    from raysort.cli import main
+
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def assert_one_line_error(err, *fragments):
+    """stderr is exactly one 'raysort: error: ...' line (no traceback) containing fragments."""
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("raysort: error: "), err
+    assert "Traceback" not in err
+    for fragment in fragments:
+        assert fragment in lines[0], (fragment, lines[0])

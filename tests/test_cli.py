@@ -17,6 +17,8 @@ import raysort
 from raysort import output
 from raysort.cli import main
 
+from _helpers import assert_one_line_error, run
+
 BUILTINS = {("generators", "pinhole"), ("sorters", "none"), ("sorters", "nah"),
             ("sorters", "nah_numpy"), ("traversals", "single"), ("traversals", "masked"),
             ("traversals", "ranged"), ("traversals", "partition"), ("shaders", "lambert"),
@@ -29,23 +31,6 @@ def srgb8(linear):
     """8-bit sRGB code of a linear value in [0, 1] (IEC 61966-2-1)."""
     v = 12.92 * linear if linear <= 0.0031308 else 1.055 * linear ** (1 / 2.4) - 0.055
     return int(np.floor(v * 255 + 0.5))
-
-
-def run(capsys, *argv):
-    """main(argv) -> (exit code, stdout, stderr)."""
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def assert_one_line_error(err, *fragments):
-    """stderr is exactly one 'raysort: error: ...' line (no traceback) containing fragments."""
-    lines = err.splitlines()
-    assert len(lines) == 1, err
-    assert lines[0].startswith("raysort: error: "), err
-    assert "Traceback" not in err
-    for fragment in fragments:
-        assert fragment in lines[0], (fragment, lines[0])
 
 
 def run_module(*argv, cwd):

@@ -14,6 +14,8 @@ from raysort.cli import main
 from raysort.errors import ConfigError
 from raysort.sorters.none import NoneSorter
 
+from _helpers import assert_one_line_error, run
+
 TINY = {"width": 32, "height": 32, "spp": 1, "rounds": 2}
 
 
@@ -138,20 +140,6 @@ GOOD_ROW = dict(asdict(QUICK_JOB), key=QUICK_JOB.key, label=QUICK_JOB.label, err
                 isa="sse", identical_image=True, exact_traversal=True, median_seconds=0.5,
                 median_baseline_seconds=0.5, median_ratio=1.0, min_ratio=1.0, max_ratio=1.0,
                 ratios=[1.0], counters_per_ray={"ia": 1.0})
-
-
-def run(capsys, *argv):
-    """main(argv) -> (exit code, stdout, stderr)."""
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def assert_one_line_error(err, *fragments):
-    lines = err.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("raysort: error: "), err
-    for fragment in fragments:
-        assert fragment in lines[0], (fragment, lines[0])
 
 
 @pytest.fixture
