@@ -128,3 +128,20 @@ def assert_one_line_error(err, *fragments):
     assert "Traceback" not in err
     for fragment in fragments:
         assert fragment in lines[0], (fragment, lines[0])
+
+
+def child_records(proc, name):
+    """The JSON lines a child process running cases printed (``{"start": case}`` before
+    each, its outcome after); the test fails, naming the case, if the child died."""
+    import json
+    import signal
+
+    import pytest
+
+    records = [json.loads(line) for line in proc.stdout.splitlines()]
+    if proc.returncode:
+        last = records[-1].get("start") if records else None
+        code = proc.returncode
+        pytest.fail(f"{name} died ({signal.Signals(-code).name if code < 0 else code}) "
+                    f"on the case {last!r}:\n{proc.stderr[-2000:]}")
+    return records

@@ -3,9 +3,7 @@
 raises a ValueError that says so, never a crash: every built-in traversal checks them
 before its kernel reads a lane (``raysort.sdk.driver.check_packet_layout``).  The cases run in
 a child process per traversal, so a crash fails the test instead of the test run."""
-import json
 import os
-import signal
 import subprocess
 import sys
 
@@ -17,6 +15,8 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 from packets_cases import CASES      # noqa: E402
 
+from _helpers import child_records   # noqa: E402
+
 BUILT_IN = [name for name in raysort.available("traversals")
             if type(raysort.create("traversals", name)).__module__.startswith("raysort.")]
 
@@ -25,12 +25,7 @@ BUILT_IN = [name for name in raysort.available("traversals")
 def test_broken_packets_raise_a_value_error(name):
     proc = subprocess.run([sys.executable, os.path.join(HERE, "packets_cases.py"), name],
                           capture_output=True, text=True, timeout=300)
-    records = [json.loads(line) for line in proc.stdout.splitlines()]
-    if proc.returncode:
-        last = records[-1].get("start") if records else None
-        code = proc.returncode
-        pytest.fail(f"{name} died ({signal.Signals(-code).name if code < 0 else code}) "
-                    f"on the case {last!r}:\n{proc.stderr[-2000:]}")
+    records = child_records(proc, name)
     outcomes = {r["case"]: r for r in records if "case" in r}
     assert outcomes.pop("unbroken")["outcome"] == "ok"
     assert set(outcomes) == set(CASES)

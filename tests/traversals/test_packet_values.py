@@ -6,13 +6,14 @@ says of such rays is unspecified.  The cases run in a child process per traversa
 fails the test instead of the test run."""
 import json
 import os
-import signal
 import subprocess
 import sys
 
 import pytest
 
 import raysort
+
+from _helpers import child_records
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 BUILT_IN = [name for name in raysort.available("traversals")
@@ -23,15 +24,11 @@ BUILT_IN = [name for name in raysort.available("traversals")
 def test_packets_of_any_values_come_back(name):
     try:
         proc = subprocess.run([sys.executable, os.path.join(HERE, "packet_values_cases.py"),
-                               name], capture_output=True, text=True, timeout=120)
+                               name], capture_output=True, text=True, check=False,
+                              timeout=120)
     except subprocess.TimeoutExpired as exc:
         started = [json.loads(line) for line in (exc.stdout or b"").decode().splitlines()]
         pytest.fail(f"{name} hung on the case {started[-1] if started else None!r}")
-    records = [json.loads(line) for line in proc.stdout.splitlines()]
-    if proc.returncode:
-        last = records[-1].get("start") if records else None
-        code = proc.returncode
-        pytest.fail(f"{name} died ({signal.Signals(-code).name if code < 0 else code}) "
-                    f"on the case {last!r}:\n{proc.stderr[-2000:]}")
+    records = child_records(proc, name)
     done = [r["case"] for r in records if "case" in r]
     assert len(done) == 25 and done[0] == "the looping lane"
