@@ -116,11 +116,12 @@ else:
 
 
 @pytest.mark.parametrize("name", list(CASES))
-def test_a_caller_edit_is_an_error_not_a_crash(name):
+def test_a_caller_edit_is_an_error_not_a_crash(name, tmp_path):
     body, kind, fragment = CASES[name]
     script = PRELUDE + "def run():\n" + textwrap.indent(textwrap.dedent(body), "    ") + EPILOGUE
+    # run from elsewhere than the checkout: `python -c` imports from its directory
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          check=False, timeout=300)
+                          check=False, timeout=300, cwd=tmp_path)
     assert proc.returncode == 0, f"{name}: exit {proc.returncode}\n{proc.stderr[-3000:]}"
     result = json.loads(proc.stdout.splitlines()[-1])
     assert result["type"] == kind and fragment in result["message"], (name, result)
