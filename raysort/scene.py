@@ -34,7 +34,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-__all__ = ["Scene", "PointLight", "load_scene", "load_mesh", "scene_names"]
+__all__ = ["Scene", "PointLight", "load_scene", "load_mesh", "scene_names", "check_scene"]
 
 DEFAULT_SCENE = "sibenik"
 DEFAULT_ALBEDO = (0.7, 0.7, 0.7)
@@ -216,21 +216,34 @@ def scene_names():
     return sorted(p.name[:-5] for p in _packaged_dir().iterdir() if p.name.endswith(".toml"))
 
 
+def check_scene(spec):
+    """What ``spec`` names, before anything is read: ``"packaged"`` (a scene shipped with
+    raysort), ``"file"`` (a ``.toml`` scene file) or ``"mesh"`` (a mesh file); SceneError
+    for an unknown name or a file that does not exist or is not one."""
+    spec = os.fspath(spec)
+    if not os.path.exists(spec) and spec in scene_names():
+        return "packaged"
+    path = Path(spec)
+    toml = path.suffix.lower() == ".toml"
+    if not toml and not os.path.lexists(path) and not path.suffix:
+        raise SceneError(f"unknown scene {spec!r}; packaged scenes: {', '.join(scene_names())}"
+                         f" (or give a .toml scene file or a mesh file)")
+    problem = _not_a_file(path)
+    if problem:
+        raise SceneError(f"{'scene file' if toml else 'mesh'} '{path}' {problem}")
+    return "file" if toml else "mesh"
+
+
 def load_scene(spec=None):
     """A :class:`Scene` from a packaged name, a ``.toml`` scene file or a mesh file."""
     spec = DEFAULT_SCENE if spec is None else os.fspath(spec)
-    if not os.path.exists(spec) and spec in scene_names():
+    kind = check_scene(spec)
+    if kind == "packaged":
         with resources.as_file(_packaged_dir() / f"{spec}.toml") as path:
             return _load_scene_file(Path(path))
     path = Path(spec)
-    if path.suffix.lower() == ".toml":
-        problem = _not_a_file(path)
-        if problem:
-            raise SceneError(f"scene file '{path}' {problem}")
+    if kind == "file":
         return _load_scene_file(path)
-    if not os.path.lexists(path) and not path.suffix:
-        raise SceneError(f"unknown scene {spec!r}; packaged scenes: {', '.join(scene_names())}"
-                         f" (or give a .toml scene file or a mesh file)")
     vertices, faces, colors = load_mesh(path)
     albedo = colors / 255.0 if colors is not None else DEFAULT_ALBEDO
     return Scene.from_mesh(vertices, faces, albedo=albedo, name=_printable(path.stem))

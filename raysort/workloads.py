@@ -147,12 +147,21 @@ def bounce_rays(scene, width=256, height=256, spp=1, seed=0, depth=1, tile=32):
                     spp=spp, seed=seed, tile=tile)
 
 
-def _collect(scene, kind, *, width, height, spp, seed, tile, generator="pinhole", threads=1):
-    """Render with a tap; returns the workload and the render's records it was made of."""
+def check_kind(kind):
+    """``kind`` (a name, ``"name:key=value,..."`` or a dict with a ``"type"``) as a spec
+    dict whose kind exists; ConfigError otherwise.  Its parameters are checked against a
+    scene when its rays are made."""
     spec = dict(kind) if isinstance(kind, dict) else parse_spec(str(kind))
     name = spec.get("type")
     if name not in KINDS:
         raise ConfigError(f"unknown workload kind {name!r}; kinds: {', '.join(KINDS)}")
+    return spec
+
+
+def _collect(scene, kind, *, width, height, spp, seed, tile, generator="pinhole", threads=1):
+    """Render with a tap; returns the workload and the render's records it was made of."""
+    spec = check_kind(kind)
+    name = spec["type"]
     k = KINDS[name]
     params = k.check(spec, scene)
     depth = params.get("depth", 0)

@@ -6,6 +6,7 @@ import os
 from raysort.argtypes import non_negative, positive, seed, size
 from raysort.bench.configs import load_table, select
 from raysort.errors import ConfigError, OutputError
+from raysort.scene import check_scene
 
 __all__ = ["PAPER_SCENES", "add_parser", "cmd_bench"]
 
@@ -78,8 +79,10 @@ def add_parser(sub):
 
 def bvh_params(text):
     """``--bvh``: a preset name or ``key=value`` pairs, as a Pipeline ``bvh`` dict."""
-    if not text:
+    if text is None:
         return None
+    if not text.strip():
+        raise ConfigError("--bvh is empty: give a preset name or key=value pairs")
     from raysort.registry import parse_spec
 
     if "=" not in text:
@@ -142,13 +145,18 @@ def cmd_bench(args):
 
         BVH.check_parameters(**bvh)          # a bad preset or parameter: an error now
     scenes = args.scenes or PAPER_SCENES
+    for spec in scenes:         # every scene before any is timed (its mesh is read later)
+        check_scene(spec)
     progress = Progress("bench", enabled=not args.quiet)
     if args.kernels:
         from raysort.bench.kernels import run_kernels
+        from raysort.workloads import check_kind
 
         width, height = args.size or (256, 256)
-        report = run_kernels(scenes, configs,
-                             args.workloads or table.kernels.get("workloads", ["primary"]),
+        kinds = args.workloads or table.kernels.get("workloads", ["primary"])
+        for kind in kinds:      # every kind's name before any is timed
+            check_kind(kind)
+        report = run_kernels(scenes, configs, kinds,
                              width=width, height=height, spp=args.spp or 1, seed=args.seed,
                              repeat=args.repeat, order_seed=args.order_seed, bvh=bvh,
                              warmup=args.warmup, progress=progress)

@@ -276,6 +276,21 @@ def test_bad_output_paths_are_one_line_before_anything_runs(tmp_path, monkeypatc
     assert [p.name for p in tmp_path.iterdir()] == ["mine.toml"]
 
 
+@pytest.mark.parametrize("args, problem", [
+    (["cornell", "missing.ply", "--only", "ranged (8x8)"], "mesh 'missing.ply' does not exist"),
+    (["cornell", "nosuchscene", "--only", "ranged (8x8)"], "unknown scene 'nosuchscene'"),
+    (["cornell", "--kernels", "--traversals", "ranged", "--workloads", "primary,nope"],
+     "unknown workload kind 'nope'"),
+    (["cornell", "--bvh", "", "--only", "ranged (8x8)"], "--bvh is empty"),
+])
+def test_every_scene_and_workload_is_checked_before_any_is_timed(tmp_path, monkeypatch, capsys,
+                                                                 nothing_runs, args, problem):
+    """A bad second scene or workload kind fails before the first is loaded or timed."""
+    monkeypatch.chdir(tmp_path)
+    one_line_error(capsys, [*args, *FAST, "--json", "b.json"], problem)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_chart_takes_the_format_its_extension_names(tmp_path, monkeypatch):
     pytest.importorskip("matplotlib")
     monkeypatch.chdir(tmp_path)
