@@ -1,8 +1,7 @@
 """The bounds-checked build (``RAYSORT_DEBUG_CYTHON=1 pip install .``) checks bounds.
 
-A kernel given an input array shorter than the others raises IndexError in that
-build (the normal build would read past the array, so the probe runs in a child
-process).  The test runs when ``RAYSORT_DEBUG_CYTHON`` says the installed build
+A kernel given an input array its caller promised to be longer raises IndexError in
+that build (the probe runs in a child process).  The test runs when ``RAYSORT_DEBUG_CYTHON`` says the installed build
 is the checked one, as in the second half of ``.ci/run``.
 """
 import os
@@ -13,14 +12,15 @@ import pytest
 
 DEBUG = os.environ.get("RAYSORT_DEBUG_CYTHON", "").strip().lower() in ("1", "yes", "true", "on")
 
+# _contract.sort_result's caller promises at least one offset; without one, the checked
+# build stops at the first index into the empty array (the normal build takes the
+# pointer to its start without reading it, and the kernel reports bad offsets)
 PROBE = """
 import numpy as np
-from raysort import _gather
-prim = np.zeros(2, np.int32)                  # lanes 2 and 3 have no prim
-index = np.array([0, 1, 2, 3], np.int32)
-out = np.zeros(4, np.uint8)
+from raysort import _contract
+order, offsets = np.zeros(4, np.int32), np.zeros(0, np.int32)
 try:
-    _gather.scatter_occluded(prim, index, out)
+    _contract.sort_result(order, offsets, np.array([0, 4], np.int32), 4, 4096)
     print("no error")
 except IndexError as exc:
     print("IndexError:", exc)
