@@ -116,21 +116,6 @@ def _shown(path):
     return os.fsencode(path).decode("utf-8", "backslashreplace")
 
 
-def _distinct_outputs(scene, outputs):
-    """ConfigError if two of the ``(what, path)`` outputs (path None: not written) are one
-    file, or one of them is the scene file given on the command line."""
-    seen = {}
-    if scene is not None and os.path.isfile(scene):
-        seen[os.path.realpath(scene)] = f"the scene file {scene!r}"
-    for what, path in outputs:
-        if not path:
-            continue
-        key = os.path.realpath(path)
-        if key in seen:
-            raise ConfigError(f"{what} {path!r} is {seen[key]}; give it another name")
-        seen[key] = f"{what} {path!r}"
-
-
 def cmd_render(args):
     from raysort import output
     from raysort.pipeline import Pipeline
@@ -141,8 +126,9 @@ def cmd_render(args):
         raise ConfigError(f"the output must be an .exr file (a .png preview is written next "
                           f"to it), got {out!r}")
     png = os.path.splitext(out)[0] + ".png"
-    _distinct_outputs(args.scene, [("the image", out), ("the preview", png),
-                                   ("--json", args.json)])
+    output.check_distinct([("-o", "the image", out), ("-o", "the preview", png),
+                           ("--json", "the --json file", args.json)],
+                          [("the scene file", args.scene)])
     for path in (out, png, args.json):
         if path is not None:
             output.check_writable(path, parents=True)

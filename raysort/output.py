@@ -34,7 +34,7 @@ import tempfile
 
 import numpy as np
 
-from raysort.errors import OutputError
+from raysort.errors import ConfigError, OutputError
 
 try:
     import fcntl
@@ -190,6 +190,22 @@ def check_writable(path, *, parents=False):
     problem = _path_problem(path, parents)
     if problem is not None:
         raise OutputError(f"cannot write {_q(path)}: {problem}")
+
+
+def check_distinct(outputs, inputs=()):
+    """ConfigError if two of a command's outputs are one file, or an output is one of the
+    files it reads: each output an ``(option, what, path)`` (a path None or empty is not
+    written), each input a ``(what, path)``.  The message names the later output's option
+    and the other's ``what``: ``--csv 's.json' is the results file 's.json'``."""
+    seen = {os.path.realpath(p): (what, p) for what, p in inputs if p and os.path.isfile(p)}
+    for option, what, path in outputs:
+        if not path:
+            continue
+        key = os.path.realpath(path)
+        if key in seen:
+            other, known = seen[key]
+            raise ConfigError(f"{option} {path!r} is {other} {known!r}; give it another name")
+        seen[key] = (what, path)
 
 
 def make_parents(path):

@@ -431,9 +431,8 @@ def cmd_sweep(args):
     for path in (args.output, args.csv):
         if path is not None:                     # "" too: it cannot be written
             output.check_writable(path)
-    if args.csv is not None and os.path.realpath(args.csv) == os.path.realpath(args.output):
-        raise ConfigError(f"--csv {args.csv!r} is the results file {args.output!r}; give it "
-                          f"another name")
+    output.check_distinct([("-o", "the results file", args.output),
+                           ("--csv", "the CSV file", args.csv)])
     width, height = args.size
     jobs = matrix(args.scenes, args.sorters, args.traversals, args.depths or (2,),
                   width=width, height=height, spp=args.spp, seed=args.seed,

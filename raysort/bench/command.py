@@ -1,8 +1,6 @@
 """The ``raysort bench`` command line (added to ``raysort``'s parser by raysort.cli)."""
 from __future__ import annotations
 
-import os
-
 from raysort.argtypes import non_negative, positive, seed, size
 from raysort.bench.configs import load_table, select
 from raysort.errors import ConfigError, OutputError
@@ -97,18 +95,14 @@ def check_outputs(args):
 
     outputs = [(f"--{k}", p) for k, p in (("json", args.json), ("chart", args.chart))
                if p is not None]
-    inputs = [("the --configs file", p) for p in args.configs]
-    inputs += [("the scene file", p) for p in args.scenes if os.path.isfile(p)]
-    for k, (flag, path) in enumerate(outputs):
+    for flag, path in outputs:
         try:
             output.check_writable(path)
         except OutputError as exc:
             raise OutputError(f"{flag}: {exc}") from None
-        earlier = [(f"the {f} file", p) for f, p in outputs[:k]]
-        for other, known in earlier + inputs:
-            if os.path.realpath(path) == os.path.realpath(known):
-                raise ConfigError(f"{flag} {path!r} is {other} {known!r}; give it "
-                                  f"another name")
+    output.check_distinct([(flag, f"the {flag} file", path) for flag, path in outputs],
+                          [("the --configs file", p) for p in args.configs]
+                          + [("the scene file", p) for p in args.scenes])
     if args.chart is not None:
         from raysort.bench.report import chart_format
 
