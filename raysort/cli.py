@@ -16,6 +16,7 @@ from raysort.argtypes import positive as _positive
 from raysort.argtypes import seed as _seed
 from raysort.argtypes import size as _size
 from raysort.errors import ConfigError, RaysortError
+from raysort.output import shown
 
 __all__ = ["main"]
 
@@ -107,13 +108,7 @@ def _print_summary(result, out, stats_table, stream=None, created=()):
         layers = f" (AOV layers: {', '.join(result.aov)})" if result.aov else ""
         made = "".join(f" (created directory {d})" for d in created)
         png = os.path.splitext(out)[0] + ".png"
-        print(f"  wrote {_shown(out)}{layers} and {_shown(png)}{made}", file=stream)
-
-
-def _shown(path):
-    """A path as text any terminal takes: bytes of its name that are not UTF-8 (a POSIX
-    name may hold them) as backslash escapes."""
-    return os.fsencode(path).decode("utf-8", "backslashreplace")
+        print(f"  wrote {shown(out)}{layers} and {shown(png)}{made}", file=stream)
 
 
 def cmd_render(args):

@@ -42,6 +42,7 @@ except ImportError:  # Windows: pairs are renamed without a lock
     fcntl = None
 
 __all__ = [
+    "shown",
     "write_image",
     "write_render",
     "write_exr",
@@ -190,6 +191,17 @@ def check_writable(path, *, parents=False):
     problem = _path_problem(path, parents)
     if problem is not None:
         raise OutputError(f"cannot write {_q(path)}: {problem}")
+
+
+def shown(text):
+    """``text`` as any output takes it (a terminal, a CSV, EXR metadata, a chart): the
+    bytes of a file name that are not UTF-8, which POSIX allows and Python holds as
+    lone surrogates (as in ``sys.argv``), become ``\\xNN`` escapes."""
+    try:
+        raw = text.encode("utf-8", "surrogateescape")
+    except UnicodeEncodeError:                   # a lone surrogate of no byte
+        raw = text.encode("utf-8", "backslashreplace")
+    return raw.decode("utf-8", "backslashreplace")
 
 
 def check_distinct(outputs, inputs=()):

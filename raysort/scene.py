@@ -27,6 +27,7 @@ from raysort.bvh import BVH, degenerate_faces
 from raysort.camera import Camera
 from raysort.errors import ConfigError, SceneError
 from raysort.mesh import check_mesh, per_face
+from raysort.output import shown
 from raysort.params import vector3
 
 try:
@@ -153,12 +154,6 @@ def _not_a_file(path):
     return None if stat.S_ISREG(mode) else "is not a file"
 
 
-def _printable(name):
-    """A file name as text any output takes: bytes that are not UTF-8 (a POSIX name
-    may hold them) as backslash escapes."""
-    return os.fsencode(name).decode("utf-8", "backslashreplace")
-
-
 def load_mesh(path):
     """``(vertices, faces, face_colors)`` of a mesh file; colours are uint8 (m, 3) or None."""
     import trimesh
@@ -246,7 +241,7 @@ def load_scene(spec=None):
         return _load_scene_file(path)
     vertices, faces, colors = load_mesh(path)
     albedo = colors / 255.0 if colors is not None else DEFAULT_ALBEDO
-    return Scene.from_mesh(vertices, faces, albedo=albedo, name=_printable(path.stem))
+    return Scene.from_mesh(vertices, faces, albedo=albedo, name=shown(path.stem))
 
 
 def _framing(vertices, where):
@@ -372,6 +367,6 @@ def _load_scene_file(path):
     sky = _non_negative3(where, "sky.radiance", doc.get("sky", {}).get("radiance", (0, 0, 0)))
     try:
         return Scene(vertices, faces, albedo, emission, camera, sky, lights,
-                     doc.get("name", _printable(path.stem)), str(path))
+                     doc.get("name", shown(path.stem)), str(path))
     except SceneError as exc:
         raise SceneError(f"scene file '{where}': {exc}") from None

@@ -32,6 +32,7 @@ import numpy as np
 
 from raysort import registry
 from raysort.errors import ConfigError
+from raysort.output import shown
 from raysort.pipeline import Pipeline
 from raysort.scene import load_scene
 
@@ -336,18 +337,8 @@ def _flat(row, prefix=""):
             out.update(_flat(v, f"{prefix}{k}."))
         else:
             v = " ".join(map(repr, v)) if isinstance(v, list) else v
-            out[_shown(prefix + k)] = _shown(v) if isinstance(v, str) else v
+            out[shown(prefix + k)] = shown(v) if isinstance(v, str) else v
     return out
-
-
-def _shown(text):
-    """``text`` as UTF-8 can encode it: the bytes of a file name that is not UTF-8 (which
-    Python decodes to lone surrogates, as in ``sys.argv``) become ``\\xNN`` escapes."""
-    try:
-        raw = text.encode("utf-8", "surrogateescape")
-    except UnicodeEncodeError:                   # a lone surrogate of no byte (from a file)
-        raw = text.encode("utf-8", "backslashreplace")
-    return raw.decode("utf-8", "backslashreplace")
 
 
 # --------------------------------------------------------------------------
@@ -357,7 +348,7 @@ def _shown(text):
 def format_table(rows, stream=None):
     """The rows grouped by machine (host, CPU, SIMD path): median seconds and ratios."""
     stream = sys.stdout if stream is None else stream
-    rows = [{k: _shown(v) if isinstance(v, str) else v for k, v in row.items()}
+    rows = [{k: shown(v) if isinstance(v, str) else v for k, v in row.items()}
             for row in rows]                     # a stream may not take a name's odd bytes
     machines = {}
     for row in rows:
@@ -446,7 +437,7 @@ def cmd_sweep(args):
         finally:
             progress.close()
     format_table(rows)
-    print(_shown(f"\nwrote {args.output}" + (f" and {args.csv}" if args.csv else "")))
+    print(shown(f"\nwrote {args.output}" + (f" and {args.csv}" if args.csv else "")))
     bad = [r for r in rows if r["error"] is not None
            or (r["exact_traversal"] and not r["identical_image"])]
     return 1 if bad else 0

@@ -18,10 +18,11 @@ import numpy as np
 
 from raysort.bench.rounds import ratios, summary
 from raysort.errors import ConfigError
+from raysort.output import shown
 from raysort.stats import COUNTER_LABELS
 
 __all__ = ["SCHEMA", "chart_format", "draw_chart", "failures", "format_report", "group_report",
-           "load_average", "machine_info", "shown", "write_chart"]
+           "load_average", "machine_info", "write_chart"]
 
 #: the JSON layout's name and version, written into every report
 SCHEMA = "raysort-bench/2"
@@ -279,15 +280,6 @@ def write_chart(report, path, data=None):
         data = draw_chart(report, chart_format(path))
     with atomic_target(path) as tmp, open(tmp, "wb") as fh:
         fh.write(data)
-
-
-def shown(text):
-    """``text`` as any output takes it: the bytes of a file name that are not UTF-8
-    (held as lone surrogates) as backslash escapes."""
-    try:
-        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
-    except UnicodeEncodeError:
-        return text.encode("utf-8", "backslashreplace").decode("utf-8")
 
 
 def _bars(plt, report, groups):
