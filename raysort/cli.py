@@ -106,7 +106,7 @@ def _print_summary(result, out, stats_table, stream=None, created=()):
                                                         COUNTER_LABELS), file=stream)
     if out:
         layers = f" (AOV layers: {', '.join(result.aov)})" if result.aov else ""
-        made = "".join(f" (created directory {d})" for d in created)
+        made = "".join(f" (created directory {shown(d)})" for d in created)
         png = os.path.splitext(out)[0] + ".png"
         print(f"  wrote {shown(out)}{layers} and {shown(png)}{made}", file=stream)
 
