@@ -140,11 +140,20 @@ def cmd_render(args):
                                  aov=args.aov, client=client)
         finally:
             progress.close()
-    created = [d for d in (output.make_parents(p) for p in (out, args.json) if p) if d]
-    result.write(out, exposure=args.exposure)
-    if args.json:
-        output.write_json(args.json, {"settings": result.settings,
-                                      "stats": result.stats.as_dict()})
+    sidecars = {args.json: output.json_text({"settings": result.settings,
+                                             "stats": result.stats.as_dict()})} \
+        if args.json else None
+    made = []                   # (output, the outermost directory created for it)
+    try:
+        for path in (out, args.json):
+            if path:
+                made.append((path, output.make_parents(path)))
+        result.write(out, exposure=args.exposure, sidecars=sidecars)
+    except BaseException:       # nothing written: the directories made for it go too
+        for path, top in reversed(made):
+            output.remove_parents(path, top)
+        raise
+    created = [top for _, top in made if top]
     _print_summary(result, out, args.stats, created=created)
     return 0
 

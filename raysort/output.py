@@ -53,8 +53,10 @@ __all__ = [
     "read_png",
     "check_writable",
     "make_parents",
+    "remove_parents",
     "atomic_target",
     "write_json",
+    "json_text",
     "tone_map",
     "SUPPORTED_SUFFIXES",
 ]
@@ -245,6 +247,22 @@ def make_parents(path):
         raise OutputError(f"cannot write {_q(path)}: cannot create directory "
                           f"{_q(parent)}: {exc.strerror or exc}") from exc
     return created
+
+
+def remove_parents(path, created):
+    """Undo :func:`make_parents`: remove the directories from `path`'s parent up to
+    `created` (what it returned; None: nothing) while they are empty."""
+    if created is None:
+        return
+    parent, top = os.path.dirname(os.fspath(path)), os.path.normpath(created)
+    while parent:
+        try:
+            os.rmdir(parent)
+        except OSError:
+            return
+        if os.path.normpath(parent) == top:
+            return
+        parent = os.path.dirname(parent)
 
 
 def _file_mode():
@@ -763,13 +781,17 @@ def read_png(path):
 # An EXR and its PNG preview, as one pair
 # --------------------------------------------------------------------------
 
-def write_render(path, image, *, metadata=None, exposure=0.0, png=True, channels=None):
+def write_render(path, image, *, metadata=None, exposure=0.0, png=True, channels=None,
+                 sidecars=None):
     """Write a render as an EXR and (with `png`) its PNG preview next to it.
 
     Both files are complete temporaries before either is renamed; the two
     renames then happen, EXR first, while this process holds a lock on the
     directory, so concurrent writers of the same path leave the EXR and PNG
-    of one render.  Both files record the same ``raysort.render_id`` (an
+    of one render.  Files in `sidecars` (such as the render's settings as
+    JSON: :func:`json_text`) are written the same way, so a failure in any
+    file leaves none of them; one naming a device (``/dev/null``) is written
+    into before any file is renamed.  Both files record the same ``raysort.render_id`` (an
     EXR header attribute and a PNG text chunk): a digest of the pixels, the
     metadata and the exposure, so the same render always gives the same bytes.
 
@@ -787,6 +809,8 @@ def write_render(path, image, *, metadata=None, exposure=0.0, png=True, channels
         Also write the PNG preview.
     channels : dict of str -> numpy.ndarray, optional
         Extra EXR channels (AOV layers), as :func:`write_exr` takes them.
+    sidecars : dict of path -> str, optional
+        Other files written with the render, all or none, as UTF-8 text.
 
     Returns
     -------
@@ -798,9 +822,10 @@ def write_render(path, image, *, metadata=None, exposure=0.0, png=True, channels
     ValueError, TypeError
         As :func:`write_exr` and :func:`write_png`.
     OutputError
-        If a file cannot be written; neither target is then changed.
+        If a file cannot be written; no target is then changed.
     """
     path = os.fspath(path)
+    sidecars = {os.fspath(p): text for p, text in (sidecars or {}).items()}
     if os.path.splitext(path)[1].lower() != ".exr":
         raise OutputError(f"cannot write {_q(path)}: a render is written to an .exr file")
     image, exposure, metadata = _as_rgb_float32(image), _check_exposure(exposure), metadata or {}
@@ -817,11 +842,20 @@ def write_render(path, image, *, metadata=None, exposure=0.0, png=True, channels
         if png:
             renames.append((temporaries.enter_context(_temporary(png_path)), png_path))
             _write_picture(picture, renames[1][0], stamp)
+        devices = []
+        for side, text in sidecars.items():
+            if _special(_final(side)):
+                devices.append((_final(side), text, side))
+                continue
+            renames.append((temporaries.enter_context(_temporary(side)), side))
+            _write_text(renames[-1][0], text, side)
         for tmp, target in renames:
             _finish(tmp, target)
+        for device, text, side in devices:
+            _write_text(device, text, side)
         with _directory_lock(os.path.dirname(path)):
             for tmp, target in renames:
-                _rename(tmp, target)
+                _rename(tmp, _final(target))
     with contextlib.suppress(OSError):
         _fsync(os.path.dirname(path) or os.curdir)
     return render_id
@@ -878,11 +912,25 @@ def write_image(path, image, **kw):
     writer(path, image, **kw)
 
 
-def write_json(path, data):
-    """Write ``data`` as indented JSON, atomically like the image writers."""
+def json_text(data):
+    """``data`` as indented JSON text, as :func:`write_json` writes it (a value JSON has
+    no type for is written as its ``str``)."""
     import json
 
+    return json.dumps(data, indent=2, default=str) + "\n"
+
+
+def _write_text(target, text, path):
+    """Write ``text`` as UTF-8 into ``target`` (a temporary of ``path``, or a device)."""
+    try:
+        with open(target, "w", encoding="utf-8") as fh:
+            fh.write(text)
+    except OSError as exc:
+        raise _os_error(path, exc) from exc
+
+
+def write_json(path, data):
+    """Write ``data`` as indented JSON (:func:`json_text`), atomically like the image
+    writers."""
     with atomic_target(path) as tmp:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(data, fh, indent=2, default=str)
-            fh.write("\n")
+        _write_text(tmp, json_text(data), path)

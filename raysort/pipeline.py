@@ -242,20 +242,23 @@ class RenderResult:
 
         return output.png_bytes(self.image)
 
-    def write(self, path, *, png=True, exposure=0.0):
+    def write(self, path, *, png=True, exposure=0.0, sidecars=None):
         """Write the EXR (and a PNG preview next to it, of the same render); each file appears
         whole or not at all (see :func:`raysort.output.write_render`).  AOV layers go into
-        the EXR as extra named channels (``depth.Z``, ``normal.X``, ...)."""
+        the EXR as extra named channels (``depth.Z``, ``normal.X``, ...).  ``sidecars``
+        (path -> text, e.g. the settings as JSON) are written with the EXR, all or none."""
         from raysort import output
 
         path = os.fspath(path)
         if not path.lower().endswith(".exr"):
+            if sidecars:
+                raise ValueError("RenderResult.write: sidecars are written with an .exr")
             return output.write_image(path, self.image, exposure=exposure)
         meta = {f"raysort.{k}": str(v) for k, v in self.settings.items()}
         from raysort.aov import exr_channels
 
         output.write_render(path, self.image, metadata=meta, exposure=exposure, png=png,
-                            channels=exr_channels(self.aov))
+                            channels=exr_channels(self.aov), sidecars=sidecars)
 
 
 class Pipeline:

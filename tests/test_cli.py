@@ -365,6 +365,39 @@ def test_json_to_a_device_writes_through_it(tmp_path, capsys):
     assert (after.st_mode, after.st_rdev) == (before.st_mode, before.st_rdev)
 
 
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
+def test_a_json_that_cannot_be_written_leaves_no_image(tmp_path, capsys):
+    """--json /dev/full (every write fails: no space): one error line, exit 2, and the
+    image and preview are not written either."""
+    code, out, err = run(capsys, "render", "plane", *TINY, "-o", tmp_path / "x.exr",
+                         "--json", "/dev/full")
+    assert code == 2 and out == ""
+    assert_one_line_error(err, "/dev/full", "No space left on device")
+    assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("fail", ["json", "png"])
+def test_a_failed_write_leaves_no_file_and_no_new_directory(fail, tmp_path, capsys,
+                                                              monkeypatch):
+    """The image, its preview and --json are written all or none: when one of them
+    cannot be written (the disk fills), none is left, nor the directories made for them,
+    and a directory that was there stays."""
+    real_text, real_picture = output._write_text, output._write_picture
+
+    def full(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(output, "_write_text", full if fail == "json" else real_text)
+    monkeypatch.setattr(output, "_write_picture", full if fail == "png" else real_picture)
+    (tmp_path / "kept").mkdir()
+    exr = tmp_path / "kept" / "new" / "x.exr"
+    js = tmp_path / "meta" / "deeper" / "x.json"
+    code, out, err = run(capsys, "render", "plane", *TINY, "-o", exr, "--json", js)
+    assert code == 2 and out == ""
+    assert_one_line_error(err, "No space left on device")
+    assert sorted(os.listdir(tmp_path)) == ["kept"] and os.listdir(tmp_path / "kept") == []
+
+
 def test_json_through_a_symbolic_link_keeps_the_link(tmp_path, capsys):
     link = tmp_path / "link.json"
     link.symlink_to(tmp_path / "real.json")

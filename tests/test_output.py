@@ -693,7 +693,7 @@ def test_write_json_is_atomic_and_readable(tmp_path, monkeypatch):
     def boom(*args, **kwargs):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(json, "dump", boom)
+    monkeypatch.setattr(json, "dumps", boom)
     with pytest.raises(RuntimeError):
         output.write_json(path, {"c": 2})
     assert json.loads(path.read_text()) == {"a": 1, "b": [1.5, "x"]}
