@@ -139,7 +139,7 @@ def cmd_bench(args):
 
         BVH.check_parameters(**bvh)          # a bad preset or parameter: an error now
     scenes = args.scenes or PAPER_SCENES
-    for spec in scenes:         # every scene before any is timed (its mesh is read later)
+    for spec in scenes:         # every scene's name, before anything is read or timed
         check_scene(spec)
     progress = Progress("bench", enabled=not args.quiet)
     if args.kernels:

@@ -76,12 +76,9 @@ def run_kernels(scene_specs, configs, kinds, *, width=256, height=256, spp=1, se
                            "order_seed": order_seed, "warmup": warmup,
                            "workloads": list(kinds), "bvh": dict(bvh or {})},
               "groups": {}}
-    jobs = [(spec, kind) for spec in scene_specs for kind in kinds]
-    scenes = {}
-    for j, (spec, kind) in enumerate(jobs):
-        if spec not in scenes:
-            scenes[spec] = load_scene(spec)
-        scene = scenes[spec]
+    scenes = [load_scene(spec) for spec in scene_specs]     # every mesh read before timing
+    jobs = [(scene, kind) for scene in scenes for kind in kinds]
+    for j, (scene, kind) in enumerate(jobs):
         built = scene.bvh(**(bvh or {}))
         work = workload(scene, kind, width=width, height=height, spp=spp, seed=seed)
         traces = [_Trace(c, built, work) for c in configs]

@@ -291,6 +291,23 @@ def test_every_scene_and_workload_is_checked_before_any_is_timed(tmp_path, monke
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("mode", [["--only", "ranged (8x8)"],
+                                  ["--kernels", "--traversals", "ranged", "--only", "ranged / 8x8"]])
+def test_a_corrupt_second_mesh_fails_before_anything_is_timed(tmp_path, monkeypatch, capsys,
+                                                              mode):
+    """Every mesh is read before the first scene is timed: a corrupt second one is the
+    command's one error line, and nothing was timed or written."""
+    def no_timing(*args, **kwargs):
+        raise AssertionError("a scene was timed")
+
+    monkeypatch.setattr("raysort.bench.frame.run_checked", no_timing)
+    monkeypatch.setattr("raysort.bench.kernels.run_checked", no_timing)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "bad.ply").write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\n")
+    one_line_error(capsys, ["cornell", "bad.ply", *mode, *FAST, "--json", "b.json"], "bad.ply")
+    assert [p.name for p in tmp_path.iterdir()] == ["bad.ply"]
+
+
 def test_chart_takes_the_format_its_extension_names(tmp_path, monkeypatch):
     pytest.importorskip("matplotlib")
     monkeypatch.chdir(tmp_path)
