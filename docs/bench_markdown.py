@@ -37,7 +37,8 @@ def table(group, kind):
     out = ["| " + " | ".join(head) + " |", "| " + " | ".join(align) + " |"]
     for r in rows:
         share = f"{100 * r['sort_share']:.1f}%" if r["sort_share"] is not None else "n/a"
-        cells = [r["label"], spread(r["seconds"], "{:.3f}" if kind == "frame" else "{:.4f}"), f"{r['mrays_per_second']:.2f}",
+        cells = [r["label"], spread(r["seconds"], "{:.3f}" if kind == "frame" else "{:.4f}"),
+                 f"{r['mrays_per_second']:.2f}",
                  spread(r["speedup"], "{:.2f}"), share, check(r)]
         if counters:
             cells += [f"{r['counters_per_ray'][k]:.2f}" if r["counters_available"] else "n/a"

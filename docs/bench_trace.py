@@ -156,7 +156,8 @@ def main(argv=None):
         for kind in args.kinds:
             n, times, build = measure(scene, kind, configs, args.rounds, args.size,
                                       CLOCKS[args.clock])
-            print(f"\n### {scene}, {kind} ({n} {'pixels' if kind == 'frame' else 'rays'}); BVH {build['binary_s']:.2f} s, wide8 "
+            print(f"\n### {scene}, {kind} ({n} {'pixels' if kind == 'frame' else 'rays'}); "
+                  f"BVH {build['binary_s']:.2f} s, wide8 "
                   f"collapse {build['wide8_s'] * 1e3:.0f} ms, SAH binary "
                   f"{build['binary_sah']:.1f} / wide8 {build['wide8_sah']:.2f}\n")
             refs = [a for a in args.against if a in times]

@@ -20,7 +20,8 @@ def size(text):
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 320x240, got {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"expected WIDTHxHEIGHT such as 320x240, got {text!r}") from None
     if w < 1 or h < 1 or w * h > 64 * 1024 * 1024:
         raise argparse.ArgumentTypeError(f"image size {text!r} is out of range")
     return w, h
@@ -32,7 +33,7 @@ def at_least(lo):
         try:
             value = int(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}")
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
         if value < lo:
             raise argparse.ArgumentTypeError(f"expected a number >= {lo}, got {value}")
         return value

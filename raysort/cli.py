@@ -29,7 +29,7 @@ def _exposure(text):
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of stops, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected a number of stops, got {text!r}") from None
     if not -MAX_EXPOSURE <= value <= MAX_EXPOSURE:     # false for nan too
         raise argparse.ArgumentTypeError(
             f"expected stops in [-{MAX_EXPOSURE}, {MAX_EXPOSURE}], got {text!r}")
@@ -43,7 +43,7 @@ def _aov_names(text):
     try:
         return parse_names(text)
     except ConfigError as exc:
-        raise argparse.ArgumentTypeError(str(exc))
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 # --------------------------------------------------------------------------
@@ -224,7 +224,8 @@ def build_parser():
     r.add_argument("--size", type=_size, default=(320, 240), help="WIDTHxHEIGHT (320x240)")
     r.add_argument("--spp", type=_positive, default=4, help="samples per pixel (4)")
     r.add_argument("--depth", type=_non_negative, default=None,
-                   help="bounces after the primary hit: sets the shader's max_depth (lambert's default: 2)")
+                   help="bounces after the primary hit: sets the shader's max_depth "
+                        "(lambert's default: 2)")
     r.add_argument("--seed", type=_seed, default=0, help="random seed, 0..2**32-1 (0)")
     r.add_argument("--sorter", default="none", help="sorter name or name:key=value,... (none)")
     r.add_argument("--traversal", default=None,

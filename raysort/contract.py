@@ -32,7 +32,8 @@ from raysort.rays import (MAX_PACKET, MAX_RAYS, PACKET_ROWS, RAY_ROWS, PacketRow
 from raysort.stats import WHOLE_NUMBERS, Counters
 
 __all__ = ["check_packets", "check_ray_batch", "sort_arrays", "check_sort", "check_hits",
-           "check_packet_arrays", "packet_arrays", "check_rays", "check_counters", "check_generated",
+           "check_packet_arrays", "packet_arrays", "check_rays", "check_counters",
+           "check_generated",
            "check_bounce", "call_plugin", "before_traversal", "plugin_error"]
 
 _BAD = _contract.Bad

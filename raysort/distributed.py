@@ -55,7 +55,8 @@ from dataclasses import replace
 from raysort import registry
 from raysort.errors import ClusterError, ConfigError, PluginError
 
-__all__ = ["connect", "dask_client", "render_tiles", "finished", "worker_threads", "tiles_per_task", "scene_key",
+__all__ = ["connect", "dask_client", "render_tiles", "finished", "worker_threads", "tiles_per_task",
+           "scene_key",
            "send_scene", "pipeline_recipe", "worker_pipeline", "worker_info", "cache_info"]
 
 INSTALL = "pip install 'raysort[distributed]'"

@@ -105,7 +105,7 @@ def mesh_pipeline(vertices, faces, **pipeline):
     entry = _entry(vertices, faces, pipeline.get("bvh"))
     pipe = Pipeline(entry.scene, **{"check_plugins": False, **pipeline})
     with entry.lock:   # one build per mesh, however many threads ask at once
-        pipe.bvh
+        pipe.bvh  # noqa: B018 (the property builds it)
     return pipe
 
 

@@ -536,7 +536,7 @@ class Pipeline:
             finished = distributed.render_tiles(self, client, self._tile_groups(tiles, spp),
                                                 width, height, spp, seed)
         else:
-            self.bvh  # build before the workers start
+            self.bvh  # noqa: B018 (build before the workers start)
             contract.call_plugin("shaders", self.shader, "prepare", self.scene)
             finished = self._local_tiles(self._tile_groups(tiles, spp, join=tap is None),
                                          width, height, spp, seed, tap)

@@ -142,7 +142,7 @@ def _carve(*sizes):
     same length do not compete for the same cache sets when a kernel streams them
     together (a length of a multiple of 4 kB would make them)."""
     starts, end = [], 0
-    for k, size in enumerate(sizes):
+    for size in sizes:
         starts.append(end)
         end += -(-size // LINE) * LINE + LINE
     block = _recycler.take(end)

@@ -29,7 +29,7 @@ measured on them sees what it sees inside a render.  Trace them the way the rend
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

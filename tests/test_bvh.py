@@ -171,7 +171,7 @@ def test_pipeline_takes_a_preset(sibenik):
     pipe = raysort.Pipeline(sibenik, bvh={"preset": "manta"})
     assert pipe.bvh.preset == "manta"
     with pytest.raises(ConfigError, match="unknown preset"):
-        raysort.Pipeline(sibenik, bvh={"preset": "nope"}).bvh
+        raysort.Pipeline(sibenik, bvh={"preset": "nope"}).bvh  # noqa: B018
 
 
 @pytest.mark.parametrize("max_leaf,bins,cost", [

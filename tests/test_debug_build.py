@@ -1,8 +1,9 @@
 """The bounds-checked build (``RAYSORT_DEBUG_CYTHON=1 pip install .``) checks bounds.
 
 A kernel given an input array its caller promised to be longer raises IndexError in
-that build (the probe runs in a child process).  The test runs when ``RAYSORT_DEBUG_CYTHON`` says the installed build
-is the checked one, as in the second half of ``.ci/run``.
+that build (the probe runs in a child process).  The test runs when
+``RAYSORT_DEBUG_CYTHON`` says the installed build is the checked one, as in the second
+half of ``.ci/run``.
 """
 import os
 import subprocess

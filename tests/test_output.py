@@ -2,6 +2,7 @@
 
 PNG files are decoded with Pillow directly; EXR files with OpenEXR."""
 
+import functools
 import os
 import subprocess
 import sys
@@ -530,9 +531,9 @@ def test_path_under_regular_file(tmp_path, ext):
     afile = tmp_path / "afile"
     afile.write_bytes(b"data")
     for path in (afile / ("x" + ext), afile / "sub" / ("x" + ext)):
-        _assert_output_error(lambda: output.check_writable(path), path,
+        _assert_output_error(functools.partial(output.check_writable, path), path,
                              f"{str(afile)!r} is not a directory")
-        _assert_output_error(lambda: output.write_image(path, np.zeros((1, 1, 3))),
+        _assert_output_error(functools.partial(output.write_image, path, np.zeros((1, 1, 3))),
                              path, "is not a directory")
     assert _listdir(tmp_path) == ["afile"]
     assert afile.read_bytes() == b"data"
@@ -636,7 +637,7 @@ def test_unsupported_suffix(tmp_path):
     for name in ("x.jpg", "x", "x.exr.bak"):
         path = tmp_path / name
         message = _assert_output_error(
-            lambda: output.write_image(path, np.zeros((1, 1, 3))), path,
+            functools.partial(output.write_image, path, np.zeros((1, 1, 3))), path,
             "unsupported")
         assert ".exr" in message and ".png" in message
     assert _listdir(tmp_path) == []

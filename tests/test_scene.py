@@ -228,7 +228,7 @@ def test_full_scene_file(tmp_path):
     assert scene.camera == Camera((0.2, 0.3, -2), (0.2, 0.3, 0), (0, 1, 0), 45)
     np.testing.assert_allclose(scene.albedo, [[0.1, 0.2, 0.3]], rtol=1e-7)
     np.testing.assert_allclose(scene.sky, [0.5, 0.25, 1])
-    assert [tuple(map(float, l.position)) for l in scene.lights] == [(0, 2, -1), (1, 2, -1)]
+    assert [tuple(map(float, light.position)) for light in scene.lights] == [(0, 2, -1), (1, 2, -1)]
     assert tuple(map(float, scene.lights[0].intensity)) == (3, 4, 5)
 
 

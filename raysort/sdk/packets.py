@@ -7,7 +7,8 @@ __all__ = ["fixed_packets"]
 
 
 def fixed_packets(packets, size):
-    """Offsets that cut every large packet ``[packets[i], packets[i+1])`` into pieces of ``size``."""
+    """Offsets that cut every large packet ``[packets[i], packets[i+1])`` into pieces of
+    ``size``."""
     if isinstance(packets, np.ndarray) and packets.dtype == np.int32:
         # the same offsets in one C pass: a frame's packets are int32
         from raysort._gather import fixed_offsets

@@ -291,8 +291,9 @@ def test_every_scene_and_workload_is_checked_before_any_is_timed(tmp_path, monke
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.parametrize("mode", [["--only", "ranged (8x8)"],
-                                  ["--kernels", "--traversals", "ranged", "--only", "ranged / 8x8"]])
+@pytest.mark.parametrize("mode", [
+    ["--only", "ranged (8x8)"],
+    ["--kernels", "--traversals", "ranged", "--only", "ranged / 8x8"]])
 def test_a_corrupt_second_mesh_fails_before_anything_is_timed(tmp_path, monkeypatch, capsys,
                                                               mode):
     """Every mesh is read before the first scene is timed: a corrupt second one is the

@@ -53,7 +53,8 @@ def test_speedup_is_the_median_of_per_round_ratios_not_a_ratio_of_bests():
     assert summary(r)["median"] == pytest.approx(2.0)
     best = min(row[0] for row in seconds) / min(row[1] for row in seconds)
     assert best == pytest.approx(2.0) and summary(r)["min"] == pytest.approx(1.2)
-    medians = summary([s[0] for s in seconds])["median"] / summary([s[1] for s in seconds])["median"]
+    medians = (summary([s[0] for s in seconds])["median"]
+               / summary([s[1] for s in seconds])["median"])
     assert medians == pytest.approx(1.2)      # a ratio of medians would say 1.2x
 
 

@@ -27,6 +27,7 @@ callgrind with the checks on or off, once and twice; the frame is the difference
         python tests/benchmarks/check_cost.py sibenik --size 128 --only on --renders 1
 """
 import argparse
+import functools
 import statistics
 import time
 
@@ -107,7 +108,8 @@ def replay(calls, checks, reps):
                 best[checked] = min(best[checked], time.thread_time() - start)
         for checked in best:
             spent[checked] += best[checked]
-    alone = sum(fastest(lambda: check(*args, **kwargs), reps) for check, args, kwargs in checks)
+    alone = sum(fastest(functools.partial(check, *args, **kwargs), reps)
+                for check, args, kwargs in checks)
     return spent[True] - spent[False], alone
 
 

@@ -75,7 +75,8 @@ def main(argv=None):
     parser = frame_parser(__doc__, 512)
     parser.add_argument("--rounds", type=int, default=5, help="timed rounds (5)")
     parser.add_argument("--stage-rounds", type=int, default=3,
-                        help="frames (of --stage-threads threads) the stage table is the median of (3)")
+                        help="frames (of --stage-threads threads) the stage table is the "
+                             "median of (3)")
     parser.add_argument("--no-threads", action="store_true", help="skip the 2-thread part")
     parser.add_argument("--stage-threads", type=int, choices=(1, 2), default=1,
                         help="threads of the stage table's frames (1; with 2, each stage's "

@@ -121,7 +121,8 @@ def markdown(scene, rows):
              "| --- |" + " ---: |" * (len(head) - 1)]
     for s in sorters:
         first = by[s, traversals[0]]
-        cells = [s, f"{1e3 * first['sort']['median']:.2f}", f"{1e3 * first['gather']['median']:.2f}"]
+        cells = [s, f"{1e3 * first['sort']['median']:.2f}",
+                 f"{1e3 * first['gather']['median']:.2f}"]
         cells += [f"{1e3 * by[s, t]['trace']['median']:.1f}" for t in traversals]
         cells += [f"{100 * by[s, t]['share']['median']:.1f} % "
                   f"[{100 * by[s, t]['share']['min']:.1f}–{100 * by[s, t]['share']['max']:.1f}]"

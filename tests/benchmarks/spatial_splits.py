@@ -25,7 +25,6 @@ import json
 import sys
 import time
 
-import numpy as np
 
 import raysort
 from raysort import isa

@@ -5,7 +5,6 @@ loading them gives either a :class:`raysort.RaysortError` or a scene, and a
 scene then renders (a tiny image, all finite).
 """
 import importlib.resources
-import io
 import os
 import tempfile
 

@@ -57,11 +57,15 @@ def packet(kinds, tilt=0.0):
     o, d, tmin = [], [], []
     for k in kinds:
         if k == "x":                                      # an invalid ray (tmin == tmax)
-            o.append((1, 1, 5)); d.append((0, 0, -1)); tmin.append(np.inf)
+            o.append((1, 1, 5))
+            d.append((0, 0, -1))
+            tmin.append(np.inf)
             continue
         x, y = XY[k][used[k]]
         used[k] += 1
-        o.append((x, y, 5)); d.append((tilt, tilt, -1)); tmin.append(0.0)
+        o.append((x, y, 5))
+        d.append((tilt, tilt, -1))
+        tmin.append(0.0)
     rays = RayBatch.from_arrays(np.array(o, F32), np.array(d, F32))
     rays.tmin[:] = tmin
     return rays

@@ -2,8 +2,8 @@
 overwritten with anything (``packet_values_cases.py``) comes back without a crash or a
 hang: a traversal skips an empty child slot (child 0, ``types.h``) whatever its box
 test says, so no value sends a ray back to the root through an empty slot.  What it
-says of such rays is unspecified.  The cases run in a child process per traversal, so a crash or a hang
-fails the test instead of the test run."""
+says of such rays is unspecified.  The cases run in a child process per traversal, so a
+crash or a hang fails the test instead of the test run."""
 import json
 import os
 import subprocess

@@ -331,7 +331,7 @@ def test_rays_on_box_faces_with_a_zero_direction_component(each_isa, face_planes
     operand, the running interval, when the first is NaN.  The rays hit the grid's edges
     on the lines they start on; on its outer lines (0 and 8) every box on the way has
     that face, so a box lost is a hit lost."""
-    for (p, q), V, F, bvh, rays, ref in face_planes:
+    for (p, q), _, _, bvh, rays, ref in face_planes:
         assert (ref.prim >= 0).mean() > 0.9, (p, q)
         hits, _ = trace(bvh, rays, frustum=frustum, **params)
         assert_same_hits(hits, ref, f"{each_isa} {params} frustum={frustum} axes {p}, {q}")

@@ -6,12 +6,11 @@ collapse is checked against an independent Python transcription of the
 SAH-optimal dynamic program and against the triangles it must hold.
 (The conformance suite holds wide8 to the full contract on the active ISA.)
 """
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
 
-import raysort
 from raysort import procedural
 from raysort.bvh import BVH
 from raysort.reference import brute_force
@@ -134,7 +133,7 @@ def reference_sah(bvh, group_cost, merged):
     2017), written independently of the Cython DP."""
     nodes = bvh.nodes
 
-    @lru_cache(maxsize=None)
+    @cache
     def tris(b):
         n = nodes[b]
         return int(n["count"]) if n["count"] else tris(b + 1) + tris(int(n["offset"]))
@@ -142,7 +141,7 @@ def reference_sah(bvh, group_cost, merged):
     def area(b):
         return _area(nodes[b]["lo"], nodes[b]["hi"])
 
-    @lru_cache(maxsize=None)
+    @cache
     def cover(b, i):         # best cost of subtree b in at most i slots
         n = nodes[b]
         leaf = area(b) * group_cost * -(-tris(b) // 8)
@@ -156,7 +155,7 @@ def reference_sah(bvh, group_cost, merged):
     def split(b, j):
         return min(cover(b + 1, k) + cover(int(nodes[b]["offset"]), j - k) for k in range(1, j))
 
-    @lru_cache(maxsize=None)
+    @cache
     def below(b):
         return split(b, 8)
 
