@@ -826,6 +826,13 @@ def write_render(path, image, *, metadata=None, exposure=0.0, png=True, channels
     """
     path = os.fspath(path)
     sidecars = {os.fspath(p): text for p, text in (sidecars or {}).items()}
+    outputs = [path, os.path.splitext(path)[0] + ".png"] if png else [path]
+    for side, text in sidecars.items():
+        if not isinstance(text, str):
+            raise TypeError(f"sidecar {_q(side)}: text (str) expected, got {type(text).__name__}")
+        if any(os.path.realpath(side) == os.path.realpath(o) for o in outputs):
+            raise OutputError(f"cannot write {_q(side)}: it is one of the render's own files")
+        outputs.append(side)
     if os.path.splitext(path)[1].lower() != ".exr":
         raise OutputError(f"cannot write {_q(path)}: a render is written to an .exr file")
     image, exposure, metadata = _as_rgb_float32(image), _check_exposure(exposure), metadata or {}

@@ -342,6 +342,32 @@ def test_write_render_pair_shares_a_render_id(tmp_path):
     assert _listdir(tmp_path) == ["only.EXR", "r.exr", "r.png"]
 
 
+def test_write_render_writes_its_sidecars_with_it(tmp_path, monkeypatch):
+    """Sidecars are written with the EXR and PNG; one that fails leaves none of the
+    files changed; a sidecar naming one of the render's own files, or text that is
+    not a str, is refused before anything is written."""
+    exr, js = tmp_path / "r.exr", tmp_path / "r.json"
+    output.write_render(exr, np.ones((2, 2, 3)), sidecars={js: '{"a": 1}\n'})
+    assert _listdir(tmp_path) == ["r.exr", "r.json", "r.png"]
+    assert js.read_text() == '{"a": 1}\n'
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+
+    def full(target, text, path):
+        raise OutputError(f"cannot write {path!r}: No space left on device")
+
+    monkeypatch.setattr(output, "_write_text", full)
+    with pytest.raises(OutputError, match="No space left"):
+        output.write_render(exr, np.zeros((2, 2, 3)), sidecars={js: "{}"})
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    monkeypatch.undo()
+    for side in (exr, tmp_path / "r.png", tmp_path / "." / "r.exr"):
+        with pytest.raises(OutputError, match="one of the render's own files"):
+            output.write_render(exr, np.zeros((2, 2, 3)), sidecars={side: "{}"})
+    with pytest.raises(TypeError, match="str"):
+        output.write_render(exr, np.zeros((2, 2, 3)), sidecars={js: b"{}"})
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
 def test_write_render_failure_changes_neither_file(tmp_path, monkeypatch):
     """The PNG fails after the EXR temporary is complete: both old files stay, no temps."""
     exr, png = tmp_path / "r.exr", tmp_path / "r.png"
