@@ -64,7 +64,8 @@ MSVC = os.name == "nt"
 # -fno-math-errno: errno is never read, so sqrt is one instruction (IEEE, correctly
 # rounded either way) and loops that take square roots can be vectorised.
 BASE_ARGS = ["/O2", "/fp:precise"] if MSVC else ["-O3", "-ffp-contract=off", "-fno-math-errno"]
-MACROS = [("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")]
+MACROS = [("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")] \
+    + ([("RAYSORT_DEBUG_CYTHON", "1")] if DEBUG else [])     # _contract._bounds_probe
 
 # The extra ISAs: (macros, flags).  No -mfma, and contraction stays off (AVX-512F
 # implies FMA): every ISA performs the same IEEE operations per lane.

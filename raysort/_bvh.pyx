@@ -34,6 +34,7 @@ import numpy as np
 cdef enum:
     MAX_BINS = 64
     STACK_SLACK = 64    # build-stack tasks beyond two per reference
+    MAX_CAPACITY = 1 << 30  # references: 2 * capacity + STACK_SLACK tasks fit an int
 
 
 cdef struct Box:
@@ -749,9 +750,87 @@ cdef int collapse_nodes(const rs_node *nodes, int n_nodes, rs_node4 *out,
     return n_out
 
 
+cdef int check_mesh(str name, const float[:, ::1] vertices,
+                    const int32_t[:, ::1] faces) except -1:
+    """ValueError naming ``name`` unless ``vertices`` (n, 3) are finite and ``faces``
+    (m, 3, m >= 1) index them (:func:`raysort.mesh.check_mesh`'s rules)."""
+    cdef Py_ssize_t nv = vertices.shape[0], i, bad_face = -1, bad_vertex = -1
+    cdef int c
+    if vertices.shape[1] != 3 or faces.shape[1] != 3 or faces.shape[0] == 0:
+        raise ValueError(f"{name}: vertices (n, 3) and faces (m, 3) with m >= 1 expected")
+    with nogil:
+        for i in range(faces.shape[0]):
+            for c in range(3):
+                if not 0 <= faces[i, c] < nv:
+                    bad_face = i
+            if bad_face >= 0:
+                break
+        for i in range(nv):
+            if (vertices[i, 0] - vertices[i, 0]) + (vertices[i, 1] - vertices[i, 1]) \
+                    + (vertices[i, 2] - vertices[i, 2]) != 0:
+                bad_vertex = i
+                break
+    if bad_face >= 0:
+        raise ValueError(f"{name}: faces[{bad_face}] names a vertex beyond the {nv} vertices")
+    if bad_vertex >= 0:
+        raise ValueError(f"{name}: vertices[{bad_vertex}] is not finite")
+    return 0
+
+
+cdef Py_ssize_t check_tree(str name, const unsigned char[::1] node_bytes,
+                           Py_ssize_t n_tris) except -1:
+    """The ``rs_tri8`` groups the leaves of ``node_bytes`` fill (a leaf's triangles in
+    groups of 8); ValueError naming ``name`` unless it holds whole nodes, at least one,
+    laid out as the builder lays them: depth first (inner node b: left child b + 1, right
+    child ``offset``, where b's left subtree ends), so every node is reached once and
+    children follow their parent, and the leaves in node order hold consecutive ranges of
+    the first ``n_tris`` or fewer triangles from 0."""
+    cdef Py_ssize_t n = node_bytes.shape[0] // sizeof(rs_node), b, bad = -1, groups = 0
+    cdef int64_t running = 0
+    cdef int32_t right
+    if n == 0 or node_bytes.shape[0] % sizeof(rs_node) or n >= 2147483647:
+        raise ValueError(f"{name}: node_bytes must hold whole nodes, at least one")
+    cdef const rs_node *nodes = <const rs_node *> &node_bytes[0]
+    cdef int32_t *end = <int32_t *> malloc(n * sizeof(int32_t))
+    if end == NULL:
+        raise MemoryError()
+    with nogil:
+        for b in range(n - 1, -1, -1):      # end[b]: where b's subtree ends
+            if nodes[b].count:
+                end[b] = <int32_t> (b + 1)
+                continue
+            right = nodes[b].offset
+            if not (b + 1 < right < n and end[b + 1] == right):
+                bad = b
+                break
+            end[b] = end[right]
+        if bad < 0 and end[0] != n:
+            bad = 0
+        for b in range(n if bad < 0 else 0):
+            if nodes[b].count:
+                if nodes[b].offset != running:
+                    bad = b
+                    break
+                running += nodes[b].count
+                groups += (nodes[b].count + 7) // 8
+        if bad < 0 and running > n_tris:
+            bad = n - 1
+    free(end)
+    if bad >= 0:
+        raise ValueError(f"{name}: node {bad} breaks the tree's layout (depth first, "
+                         f"right child after the left subtree, leaves holding consecutive "
+                         f"triangles of the {n_tris})")
+    return groups
+
+
 def collapse(const unsigned char[::1] node_bytes, unsigned char[::1] out_bytes):
-    """Collapse binary nodes into 4-wide nodes; returns (count, depth)."""
+    """Collapse binary nodes into 4-wide nodes; returns (count, depth).  ValueError unless
+    the nodes form a tree as the builder lays it out (see :func:`check_tree`) and
+    ``out_bytes`` has room for as many 4-wide nodes."""
     cdef int n_nodes = node_bytes.shape[0] // sizeof(rs_node), n_out, depth = 0
+    check_tree("collapse", node_bytes, 2147483647)
+    if out_bytes.shape[0] < n_nodes * <Py_ssize_t> sizeof(rs_node4):
+        raise ValueError(f"collapse: out_bytes must have room for {n_nodes} 4-wide nodes")
     with nogil:
         n_out = collapse_nodes(<const rs_node *> &node_bytes[0], n_nodes,
                                <rs_node4 *> &out_bytes[0], &depth)
@@ -763,12 +842,16 @@ def build(const float[:, ::1] vertices, const int32_t[:, ::1] faces, int max_lea
           unsigned char[::1] node_bytes, int32_t[::1] order, unsigned char[::1] tri_bytes):
     """Build a BVH into preallocated buffers (nodes: 2 * capacity, order and triangles:
     capacity >= the triangle count; capacity > it allows spatial splits);
-    returns (node count, reference count, depth)."""
+    returns (node count, reference count, depth).  ValueError at a mesh
+    :func:`check_mesh` refuses, or buffers or parameters out of range."""
     cdef int n = faces.shape[0], n_nodes, n_refs = 0, depth = 0
+    check_mesh("build", vertices, faces)
     if not 1 <= bins <= MAX_BINS:
         raise ValueError(f"bins must be in 1..{MAX_BINS}, got {bins}")
-    if not (n <= capacity and order.shape[0] >= capacity
-            and node_bytes.shape[0] >= (2 * capacity) * <Py_ssize_t> sizeof(rs_node)
+    if not 1 <= max_leaf <= 65535:
+        raise ValueError(f"build: max_leaf must be in 1..65535 (a leaf's count), got {max_leaf}")
+    if not (n <= capacity <= MAX_CAPACITY and order.shape[0] >= capacity
+            and node_bytes.shape[0] >= 2 * <Py_ssize_t> capacity * sizeof(rs_node)
             and tri_bytes.shape[0] >= capacity * <Py_ssize_t> sizeof(rs_tri)):
         raise ValueError(f"build: buffers too small for a capacity of {capacity} references")
     cdef rs_node *nodes = <rs_node *> &node_bytes[0]
@@ -782,7 +865,11 @@ def build(const float[:, ::1] vertices, const int32_t[:, ::1] faces, int max_lea
 
 def triangles(const float[:, ::1] vertices, const int32_t[:, ::1] faces,
               unsigned char[::1] tri_bytes):
-    """Prepare triangles in input order (for brute force)."""
+    """Prepare triangles in input order (for brute force); ValueError at a mesh
+    :func:`check_mesh` refuses or a ``tri_bytes`` too small for its faces."""
+    check_mesh("triangles", vertices, faces)
+    if tri_bytes.shape[0] < faces.shape[0] * <Py_ssize_t> sizeof(rs_tri):
+        raise ValueError(f"triangles: tri_bytes must have room for {faces.shape[0]} triangles")
     with nogil:
         prepare_triangles(vertices, faces, NULL, faces.shape[0], <rs_tri *> &tri_bytes[0])
 
@@ -790,9 +877,23 @@ def triangles(const float[:, ::1] vertices, const int32_t[:, ::1] faces,
 def refit(const float[:, ::1] vertices, const int32_t[:, ::1] faces, const int32_t[::1] order,
           unsigned char[::1] node_bytes, unsigned char[::1] tri_bytes):
     """Move the triangles to new vertex positions and refit every box (a leaf's box from
-    its triangles' whole boxes, also where spatial splits had cut them)."""
+    its triangles' whole boxes, also where spatial splits had cut them).  ValueError at a
+    mesh :func:`check_mesh` refuses, an ``order`` entry that is no face, nodes that are
+    no tree of ``order``'s references (:func:`check_tree`) or a ``tri_bytes`` too small."""
     cdef int n = order.shape[0]
     cdef int n_nodes = node_bytes.shape[0] // sizeof(rs_node)
+    cdef Py_ssize_t i, m = faces.shape[0], bad = -1
+    check_mesh("refit", vertices, faces)
+    with nogil:
+        for i in range(n):
+            if not 0 <= order[i] < m:
+                bad = i
+                break
+    if bad >= 0:
+        raise ValueError(f"refit: order[{bad}] = {order[bad]} is not a face of the {m}")
+    check_tree("refit", node_bytes, n)
+    if tri_bytes.shape[0] < n * <Py_ssize_t> sizeof(rs_tri):
+        raise ValueError(f"refit: tri_bytes must have room for the {n} triangles of order")
     with nogil:
         prepare_triangles(vertices, faces, &order[0], n, <rs_tri *> &tri_bytes[0])
         refit_nodes(<rs_node *> &node_bytes[0], n_nodes, vertices, faces, &order[0])
@@ -988,9 +1089,18 @@ def collapse8(const unsigned char[::1] node_bytes, const unsigned char[::1] tri_
               unsigned char[::1] out_bytes, unsigned char[::1] group_bytes,
               double node_cost, double group_cost, int max_leaf):
     """Collapse binary nodes into 8-wide nodes and SoA leaf groups;
-    returns (nodes, groups, depth, SAH cost)."""
+    returns (nodes, groups, depth, SAH cost).  ValueError unless the nodes form a tree
+    of the triangles of ``tri_bytes`` as the builder lays it out (:func:`check_tree`),
+    ``out_bytes`` has room for as many 8-wide nodes and ``group_bytes`` for the groups
+    of its leaves."""
     cdef int n_nodes = node_bytes.shape[0] // sizeof(rs_node), n_out, n_groups = 0, depth = 0
     cdef double sah = 0
+    cdef Py_ssize_t groups = check_tree("collapse8", node_bytes,
+                                        tri_bytes.shape[0] // sizeof(rs_tri))
+    if (out_bytes.shape[0] < n_nodes * <Py_ssize_t> sizeof(rs_node8)
+            or group_bytes.shape[0] < groups * <Py_ssize_t> sizeof(rs_tri8)):
+        raise ValueError(f"collapse8: out_bytes must have room for {n_nodes} 8-wide nodes "
+                         f"and group_bytes for {groups} triangle groups")
     with nogil:
         n_out = collapse8_nodes(<const rs_node *> &node_bytes[0], n_nodes,
                                 <const rs_tri *> &tri_bytes[0], node_cost, group_cost, max_leaf,

@@ -14,6 +14,11 @@ when ``x - x == 0``.
 from libc.stdint cimport int32_t, uint8_t, uint32_t, uint64_t
 
 
+cdef inline bint unaligned16(const void *p) noexcept nogil:
+    """``p`` is not 16-byte aligned (the SIMD kernels load and store packet rows so)."""
+    return (<size_t> p) % 16 != 0
+
+
 cdef inline int ray_bad(float ox, float oy, float oz, float dx, float dy, float dz, float tmin,
                         float tmax) noexcept nogil:
     """An active ray (tmin < tmax) needs tmin >= 0 and a finite origin and direction."""
@@ -56,13 +61,17 @@ cdef inline int packet_bounds(int32_t first, const int32_t *packets, Py_ssize_t 
                               int32_t n, Py_ssize_t *k_big, int32_t *lo,
                               int32_t *hi) noexcept nogil:
     """The large packet ``[lo, hi)`` holding ray ``first``, the first of a sub-packet
-    (``packets``: n_big + 1 valid boundaries ending at n; ``k_big``: the previous
-    sub-packet's, updated); 1 if ``first`` is not a ray of ``[0, n)``."""
+    (``packets``: n_big + 1 valid boundaries ending at n, n_big >= 1; ``k_big``: the
+    previous sub-packet's, updated); 1 if ``first`` is not a ray of ``[0, n)``.  ``lo``
+    and ``hi`` are kept within ``[0, n]`` (a no-op for valid boundaries), so a ray found
+    inside them indexes the batch whatever ``packets`` holds."""
+    cdef int32_t a, b
     if first < 0 or first >= n:
         return 1
     if not (packets[k_big[0]] <= first < packets[k_big[0] + 1]):   # usually the same one
         k_big[0] = large_packet(packets, n_big, first)
-    lo[0], hi[0] = packets[k_big[0]], packets[k_big[0] + 1]
+    a, b = packets[k_big[0]], packets[k_big[0] + 1]
+    lo[0], hi[0] = (a if a > 0 else 0), (b if b < n else n)
     return 0
 
 

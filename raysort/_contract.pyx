@@ -126,7 +126,7 @@ cdef int sort_fault(const int32_t *order, int64_t a, int64_t b, const int32_t *p
         where[0] = a
         return BAD_INDEX_RANGE
     k_big = large_packet(packets, n_big, order[a])
-    lo, hi = packets[k_big], packets[k_big + 1]
+    lo, hi = max(packets[k_big], 0), min(packets[k_big + 1], n)    # as packet_bounds
     for i in range(a, b):
         if order[i] < lo or order[i] >= hi:
             where[0] = i
@@ -153,9 +153,16 @@ def sort_result(const int32_t[::1] order, const int32_t[::1] offsets,
     1..max_packet rays, each inside one large packet.  The caller checks
     ``len(order) == n`` and ``len(offsets) >= 1``; ``identity`` True says the order is
     known to be ``0, 1, ..., n - 1`` (:func:`raysort.orders.is_identity_order`), so it
-    is not read, and only the offsets are checked."""
+    is not read, and only the offsets are checked.  ValueError if ``order`` (unless
+    ``identity``) does not hold n values, ``offsets`` none or ``packets`` fewer than 2 for
+    n > 0 (their values need not be valid for the kernel to stay inside the arrays: see
+    ``packet_bounds``)."""
     cdef Py_ssize_t where = 0
     cdef int code
+    if n < 0 or (not identity and order.shape[0] != n) or offsets.shape[0] < 1 \
+            or (n and packets.shape[0] < 2):
+        raise ValueError(f"sort_result: order of n = {n} values, offsets of 1 value or more "
+                         f"and packets of 2 boundaries or more (for n > 0) expected")
     cdef uint8_t *seen = NULL if identity else <uint8_t *> calloc(n + 1, 1)
     if seen == NULL and not identity:
         raise MemoryError()
@@ -320,9 +327,13 @@ cdef int rays_kernel(const float *ox, const float *oy, const float *oz, const fl
 def rays(const float[:, ::1] data, Py_ssize_t n):
     """Rays ``[0, n)`` of a batch (the ``RS_RAY_*`` rows): each one is either active
     (``tmin < tmax``) with ``tmin >= 0`` and a finite origin and direction, or marked
-    invalid (``not tmin < tmax``), which the gather stores inactive."""
+    invalid (``not tmin < tmax``), which the gather stores inactive.  ValueError unless
+    ``data`` has the ray rows of n rays or more."""
     cdef Py_ssize_t where = 0
     cdef int code
+    if data.shape[0] != RS_RAY_ROWS or not 0 <= n <= data.shape[1]:
+        raise ValueError(f"rays: data ({RS_RAY_ROWS}, capacity) with 0 <= n <= capacity "
+                         f"expected")
     with nogil:
         code = rays_kernel(&data[RS_RAY_OX, 0], &data[RS_RAY_OY, 0], &data[RS_RAY_OZ, 0],
                            &data[RS_RAY_DX, 0], &data[RS_RAY_DY, 0], &data[RS_RAY_DZ, 0],
@@ -463,13 +474,17 @@ def paths(const float[:, ::1] data, Py_ssize_t m, const int32_t[::1] parent,
     pass: each ray finite or marked invalid (see :func:`rays`; skipped without
     ``with_rays``, when the gather checks them); ``parent`` ascending in
     ``[0, n)``; ``weight`` (3, m; rows contiguous) finite; ``slot`` (None, or int32)
-    in ``[0, slots)``."""
+    in ``[0, slots)``; ValueError unless ``data`` holds the ray rows of m rays and
+    ``parent`` and ``slot`` m values or more."""
     cdef Py_ssize_t where = 0
     cdef int code, c
     cdef const float *r[RS_RAY_ROWS]
     cdef const float *w[3]
     cdef const int32_t[::1] slot32
     cdef const int32_t *slot_ptr = NULL
+    if m < 0 or data.shape[0] != RS_RAY_ROWS or data.shape[1] < m or parent.shape[0] < m:
+        raise ValueError(f"paths: data ({RS_RAY_ROWS}, capacity >= m) and parent of m values "
+                         f"expected, m >= 0")
     if m == 0:
         return 0, 0
     if weight.shape[0] != 3 or weight.shape[1] < m or weight.strides[1] != sizeof(float):
@@ -480,6 +495,8 @@ def paths(const float[:, ::1] data, Py_ssize_t m, const int32_t[::1] parent,
         w[c] = &weight[c, 0]
     if slot is not None:
         slot32 = slot
+        if slot32.shape[0] < m:
+            raise ValueError("paths: slot must hold m values")
         slot_ptr = &slot32[0]
     with nogil:
         code = paths_kernel(<const float *const *> r if with_rays else NULL, &parent[0], w,
@@ -553,3 +570,28 @@ def bounce_ok(bounce, int64_t n, int64_t slots, const double[:, ::1] radiance no
     return shadow is None or (type(shadow) is shadow_type and paths_ok(
         shadow.rays, shadow.parent, shadow.slot, shadow.contribution, n, slots, with_rays,
         with_paths, batch_type))
+
+
+# ---------------------------------------------------------------------------
+# the bounds-checked build's probe
+# ---------------------------------------------------------------------------
+
+cdef extern from *:
+    """
+    #ifdef RAYSORT_DEBUG_CYTHON
+    #define RS_BOUNDS_CHECKED 1
+    #else
+    #define RS_BOUNDS_CHECKED 0
+    #endif
+    """
+    bint RS_BOUNDS_CHECKED
+
+
+def _bounds_probe(const int32_t[::1] values, Py_ssize_t i):
+    """``values[i]`` through Cython's indexing, for tests/test_debug_build.py: the
+    bounds-checked build (``RAYSORT_DEBUG_CYTHON=1``) raises IndexError for an ``i``
+    outside ``values`` by its own check; the normal build, which compiles none, refuses
+    it first with ValueError."""
+    if not RS_BOUNDS_CHECKED and not 0 <= i < values.shape[0]:
+        raise ValueError(f"_bounds_probe: index {i} outside the {values.shape[0]} values")
+    return values[i]

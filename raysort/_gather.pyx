@@ -8,7 +8,7 @@ structure-of-arrays sub-packets, computing the inverse direction on the way
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.math cimport INFINITY
 from libc.string cimport memcpy
-from raysort._checks cimport offsets_bad, packet_bounds, range_bad, slot_bad
+from raysort._checks cimport offsets_bad, packet_bounds, range_bad, slot_bad, unaligned16
 from raysort._types cimport (rs_isa_name, RS_MAX_PACKET, RS_RAY_ROWS, RS_RAY_TMIN,
                              RS_RAY_TMAX, RS_PACKET_ROWS, RS_PACKET_T)
 
@@ -212,8 +212,9 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
     sub-packet must hold rays of ``[0, n)`` from one large packet (``packets``: valid
     boundaries ending at n).  (That no ray comes twice is left to the scatter, which
     writes each ray once: see :func:`unwritten`.)  ``offsets`` must be valid
-    (:func:`sub_packets`), ``len(order) == n``, and ``starts``/``dst``/... sized for
-    them.  With ``t0``, the row ``t`` as gathered (each ray's tmax) is written there too.
+    (:func:`sub_packets`; ValueError unless they ascend from 0 to n), ``len(order) == n``,
+    and ``starts``/``dst``/... sized for them and 16-byte aligned.  With ``t0``, the row
+    ``t`` as gathered (each ray's tmax) is written there too.
 
     Two passes: the order is laid out lane by lane into ``index`` (checked on the way),
     then every lane's rows are gathered from it, as wide as the ISA allows
@@ -229,7 +230,7 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
     cdef int32_t n = order.shape[0]
     cdef const float *src_rows[RS_RAY_ROWS]
     cdef float *dst_rows[RS_PACKET_ROWS]
-    cdef int c, order_bad = 0
+    cdef int c, order_bad = 0, offsets_wrong = 0
     cdef int64_t bad_lane = -1
     cdef int32_t lo = 0, hi = 0
     cdef float *tmax = NULL
@@ -242,10 +243,18 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
     if n_packets and starts[n_packets - 1] + ((offsets[n_packets] - offsets[n_packets - 1] + 3)
                                              & ~3) > capacity:
         raise ValueError("gather: the last sub-packet ends beyond the lanes")
+    if offsets[0] != 0 or offsets[n_packets] != n or (n_packets and packets.shape[0] < 2):
+        raise ValueError("gather: offsets must run from 0 to len(order), packets hold at "
+                         "least 2 boundaries (if there are sub-packets)")
     if t0 is not None:
         if t0.shape[0] != capacity:
             raise ValueError("t0 must hold one value per lane")
         tmax = &t0[0]
+    if capacity % 4 or capacity and (unaligned16(&dst[0, 0]) or unaligned16(&prim[0])
+                                     or unaligned16(&u[0]) or unaligned16(&v[0])
+                                     or unaligned16(tmax)):
+        raise ValueError("gather: dst, prim, u, v and t0 must start 16-byte aligned, with a "
+                         "multiple of 4 lanes")
     for c in range(RS_RAY_ROWS):
         src_rows[c] = &src[c, 0]
     for c in range(RS_PACKET_ROWS):
@@ -254,6 +263,9 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
         for k in range(n_packets):
             base = offsets[k]
             count = offsets[k + 1] - base
+            if count < 1 or offsets[k + 1] > n:
+                offsets_wrong = 1   # so every offset read lies in [0, n]
+                break
             if check_order and k >= checked:
                 # the run of sub-packets from k whose first rays share a large packet, then
                 # every ray of the run in it: one long loop rather than one per sub-packet
@@ -262,15 +274,19 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
                     order_bad = 1
                     break
                 checked = k + 1
-                while checked < n_packets and lo <= order[offsets[checked]] < hi:
+                while (checked < n_packets and offsets[checked - 1] < offsets[checked] < n
+                       and lo <= order[offsets[checked]] < hi):
                     checked += 1
+                if not offsets[checked - 1] < offsets[checked] <= n:
+                    offsets_wrong = 1
+                    break
                 if range_bad(&order[0], base, offsets[checked], lo, hi):
                     order_bad = 1
                     break
             s = starts[k]
-            if s < end:
-                order_bad = 1       # sub-packets overlap: starts do not fit offsets
-                break
+            if s < end or s + ((count + 3) & ~3) > capacity:
+                order_bad = 1       # sub-packets overlap or leave the lanes: starts do not
+                break               # fit offsets
             end = s + ((count + 3) & ~3)
             if not check_order and range_bad(&order[0], base, base + count, 0, n):
                 order_bad = 1       # a trusted order is not checked, but never read beyond n
@@ -283,6 +299,8 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
                 index[j] = -1
             bad_lane = rs_gather_lanes(dst_rows, &prim[0], &u[0], &v[0], tmax, src_rows,
                                        &index[0], capacity, src.shape[1])
+    if offsets_wrong:
+        raise ValueError("gather: offsets must ascend, each sub-packet 1 ray or more")
     if order_bad:
         return False, -1
     return True, (index[bad_lane] if bad_lane >= 0 else -1)

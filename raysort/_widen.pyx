@@ -8,7 +8,7 @@ ray meets the same leaf boxes as in the 8-wide tree, each behind fewer nodes.
 """
 from libc.math cimport INFINITY
 from libc.stdint cimport int32_t
-from libc.stdlib cimport malloc, free
+from libc.stdlib cimport calloc, malloc, free
 from raysort._types cimport rs_node8, rs_node16
 
 cdef enum:
@@ -126,11 +126,42 @@ cdef int widen_nodes(const rs_node8 *nodes8, int n8, rs_node16 *out, int *depth)
     return n_out
 
 
+cdef int check_tree8(const rs_node8 *nodes8, Py_ssize_t n8) except -1:
+    """ValueError unless every inner child (child > 0) of the ``n8`` 8-wide nodes comes
+    after its parent, within the nodes, and is no other slot's child too (so the nodes
+    reached from the root form a tree)."""
+    cdef unsigned char *seen = <unsigned char *> calloc(n8, 1)
+    cdef Py_ssize_t w, bad = -1
+    cdef int k
+    cdef int32_t c
+    if seen == NULL:
+        raise MemoryError()
+    with nogil:
+        for w in range(n8):
+            for k in range(WIDTH8):
+                c = nodes8[w].child[k]
+                if c > 0:
+                    if c <= w or c >= n8 or seen[c]:
+                        bad = w
+                        break
+                    seen[c] = 1
+            if bad >= 0:
+                break
+    free(seen)
+    if bad >= 0:
+        raise ValueError(f"widen16: node {bad} of the 8-wide tree has a child that is not a "
+                         f"later node of the {n8} or is another slot's child too")
+    return 0
+
+
 def widen16(const unsigned char[::1] node8_bytes, unsigned char[::1] out_bytes):
-    """Widen 8-wide nodes into 16-wide ones; returns (nodes written, depth)."""
+    """Widen 8-wide nodes into 16-wide ones; returns (nodes written, depth).  ValueError
+    for an empty tree, an output too small or nodes that form no tree (a child that does
+    not follow its parent or is reached twice)."""
     cdef int n8 = node8_bytes.shape[0] // sizeof(rs_node8), n_out, depth = 0
     if n8 == 0 or out_bytes.shape[0] < n8 * sizeof(rs_node16):
         raise ValueError("widen16: the 8-wide tree is empty or the output too small")
+    check_tree8(<const rs_node8 *> &node8_bytes[0], n8)
     with nogil:
         n_out = widen_nodes(<const rs_node8 *> &node8_bytes[0], n8,
                             <rs_node16 *> &out_bytes[0], &depth)

@@ -121,6 +121,10 @@ cdef int make_rays(const float[::1] eye, const float[::1] fwd, const float[::1] 
     return 0
 
 
+cdef enum:
+    MAX_STRATA = 46340      # strata * strata (make_rays' divisor) fits an int
+
+
 def _generate(const float[::1] eye, const float[::1] fwd, const float[::1] right,
               const float[::1] up, const int32_t[::1] pixels, const int32_t[::1] samples,
               int width, int height, int strata, bint jitter, uint32_t seed,
@@ -133,8 +137,9 @@ def _generate(const float[::1] eye, const float[::1] fwd, const float[::1] right
             or out.shape[1] < <Py_ssize_t> pixels.shape[0] * samples.shape[0]):
         raise ValueError("_generate needs 3-element frame vectors and an out of at least "
                          "(8, len(pixels) * len(samples))")
-    if width == 0 or strata == 0:       # integer divisors
-        raise ValueError("_generate: width and strata must not be 0")
+    if width < 1 or height < 1 or not 1 <= strata <= MAX_STRATA:     # integer divisors
+        raise ValueError(f"_generate: width, height >= 1 and strata 1..{MAX_STRATA} (strata "
+                         f"squared an int) expected, got {width}, {height}, {strata}")
     with nogil:
         status = make_rays(eye, fwd, right, up, pixels, samples, width, height, strata, jitter,
                            seed, out)

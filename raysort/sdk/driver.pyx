@@ -8,6 +8,7 @@ counters into a :class:`raysort.stats.Counters`.
 from libc.stdlib cimport malloc, free
 from libc.string cimport memset
 from libc.stdint cimport int32_t, uint8_t
+from raysort._checks cimport unaligned16
 from raysort._types cimport (rs_node, rs_tri, rs_rays, rs_counters, RS_MAX_PACKET,
                              RS_PACKET_ROWS, rays_view)
 
@@ -39,7 +40,8 @@ cdef int check_packet_layout(object packets) except -1:
     """ValueError unless the arrays of ``packets`` fit together, so that a kernel stays
     inside them whoever built them (a script may hand a traversal packets of its own):
     ``rows`` (``RS_PACKET_ROWS``, capacity) float32; ``prim``, ``u``, ``v`` and
-    ``index`` one value per lane; ``starts`` and ``counts`` one per sub-packet; each
+    ``index`` one value per lane, rows, prim, u and v 16-byte aligned with a multiple
+    of 4 lanes; ``starts`` and ``counts`` one per sub-packet; each
     sub-packet 0..RS_MAX_PACKET rays from a lane that is a multiple of 4, its lanes
     rounded up to 4 inside the capacity.  Returns the widest sub-packet's rays."""
     cdef const float[:, ::1] rows = packets.rows
@@ -54,6 +56,10 @@ cdef int check_packet_layout(object packets) except -1:
         raise ValueError(f"packets.prim, u, v and index must hold one value per lane "
                          f"({capacity}), got {prim.shape[0]}, {u.shape[0]}, {v.shape[0]} "
                          f"and {index.shape[0]}")
+    if capacity % 4 or capacity and (unaligned16(&rows[0, 0]) or unaligned16(&prim[0])
+                                     or unaligned16(&u[0]) or unaligned16(&v[0])):
+        raise ValueError(f"packets.rows, prim, u and v must start 16-byte aligned (the SIMD "
+                         f"kernels load them so), with a multiple of 4 lanes, got {capacity}")
     if counts.shape[0] != starts.shape[0]:
         raise ValueError(f"packets.starts and counts must be of one length, got "
                          f"{starts.shape[0]} and {counts.shape[0]}")

@@ -27,7 +27,7 @@ from libc.stdint cimport int32_t, uint32_t, uint64_t
 from libc.string cimport memcpy
 from raysort._checks cimport any_hit_bad, slot_bad
 from raysort._rng cimport sample_key
-from raysort._types cimport RS_RAY_OX, RS_RAY_DX, RS_RAY_TMIN, RS_RAY_TMAX
+from raysort._types cimport RS_RAY_OX, RS_RAY_DX, RS_RAY_TMIN, RS_RAY_TMAX, RS_RAY_ROWS
 
 # How far a new origin is pushed off the surface: this fraction of (1 + the
 # largest coordinate of the hit point), enough to clear the float32 rounding
@@ -48,6 +48,40 @@ cdef extern from "raysort/lanes.h" nogil:
                            int k, float *const *out)
 
 
+cdef inline int check_shapes(str shader, Py_ssize_t n_rays, const float[:, ::1] rays,
+                             const float[::1] t, const int32_t[::1] prim,
+                             const int32_t[::1] pixel, const int32_t[::1] sample,
+                             const int32_t[::1] slot, const float[:, ::1] thr,
+                             const double[:, ::1] radiance) except -1:
+    """The shapes :func:`checked_hits` wants (the shaders' kernels check them too):
+    ValueError naming ``shader`` unless the batch (``n_rays``, its rows ``rays``), the
+    hits' and the paths' arrays hold the n rays of ``prim`` and radiance is (slots, 3)."""
+    cdef Py_ssize_t n = prim.shape[0]
+    if rays.shape[0] < RS_RAY_TMAX + 1 or rays.shape[1] < n or n_rays != n:
+        raise ValueError(f"{shader}: the batch of {n_rays} rays must hold the {n} rays of "
+                         f"hits.prim")
+    if t.shape[0] != n or pixel.shape[0] != n or sample.shape[0] != n or slot.shape[0] != n \
+            or thr.shape[0] != 3 or thr.shape[1] != n:
+        raise ValueError(f"{shader}: hits.t and paths.pixel, sample, slot and throughput "
+                         f"(3, n) must hold the {n} rays of hits.prim")
+    if radiance.shape[1] != 3:
+        raise ValueError(f"{shader}: radiance must be (slots, 3), got "
+                         f"({radiance.shape[0]}, {radiance.shape[1]})")
+    return 0
+
+
+cdef inline int check_new_rays(str shader, str name, const float[:, ::1] rays,
+                               const int32_t[::1] parent, const float[:, ::1] weight) except -1:
+    """ValueError naming ``shader`` and the batch ``name`` unless the new rays' rows,
+    their parents and their (3, m) weights hold as many rays (m: ``len(parent)``)."""
+    cdef Py_ssize_t m = parent.shape[0]
+    if rays.shape[0] != RS_RAY_ROWS or rays.shape[1] < m or weight.shape[0] != 3 \
+            or weight.shape[1] < m:
+        raise ValueError(f"{shader}: {name} rays ({RS_RAY_ROWS}, >= m) and weights "
+                         f"(3, >= m) expected for the m = {m} values of its parents")
+    return 0
+
+
 cdef inline Py_ssize_t checked_hits(str shader, Py_ssize_t n_rays, const float[:, ::1] rays,
                                     const float[::1] t,
                                     const int32_t[::1] prim, const int32_t[::1] pixel,
@@ -63,16 +97,7 @@ cdef inline Py_ssize_t checked_hits(str shader, Py_ssize_t n_rays, const float[:
     slot, the one that counts the hits."""
     cdef Py_ssize_t i, n = prim.shape[0], rows = radiance.shape[0], hits = 0
     cdef int bad = 0
-    if rays.shape[0] < RS_RAY_TMAX + 1 or rays.shape[1] < n or n_rays != n:
-        raise ValueError(f"{shader}: the batch of {n_rays} rays must hold the {n} rays of "
-                         f"hits.prim")
-    if t.shape[0] != n or pixel.shape[0] != n or sample.shape[0] != n or slot.shape[0] != n \
-            or thr.shape[0] != 3 or thr.shape[1] != n:
-        raise ValueError(f"{shader}: hits.t and paths.pixel, sample, slot and throughput "
-                         f"(3, n) must hold the {n} rays of hits.prim")
-    if radiance.shape[1] != 3:
-        raise ValueError(f"{shader}: radiance must be (slots, 3), got "
-                         f"({rows}, {radiance.shape[1]})")
+    check_shapes(shader, n_rays, rays, t, prim, pixel, sample, slot, thr, radiance)
     with nogil:
         for i in range(n):
             hits += prim[i] >= 0

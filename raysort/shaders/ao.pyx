@@ -8,7 +8,8 @@ any-hit rays, cosine distributed around the surface normal, from every primary h
 from libc.stdint cimport int32_t, uint32_t
 from raysort._rng cimport seed_key, uniform_at
 from raysort._types cimport RS_DIM_AO
-from raysort.shaders._shading cimport (LANES, HitBlock, checked_hits, take_rays, take_normals,
+from raysort.shaders._shading cimport (LANES, HitBlock, checked_hits, check_shapes,
+                                       check_new_rays, take_rays, take_normals,
                                        take_keys, leave_surfaces, cosine_directions,
                                        write_rays)
 
@@ -84,8 +85,17 @@ def _ao(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim,
         const int32_t[::1] slot, const float[:, ::1] thr, int samples, float distance,
         float background, uint32_t seed, double[:, ::1] radiance, float[:, ::1] ao_rays,
         int32_t[::1] ao_parent, int32_t[::1] ao_slot, float[:, ::1] ao_weight):
-    """Typed entry point: make the AO rays of a batch without the GIL; returns their count."""
+    """Typed entry point: make the AO rays of a batch without the GIL; returns their count.
+    ValueError at arrays of inconsistent shapes or ``samples`` out of 1..MAX_SAMPLES;
+    trusts the values that ``AOShader.shade`` checks (``checked_hits``) or makes: prim (a
+    row of ``normals``), slot (of ``radiance``), room for ``samples`` AO rays per hit."""
     cdef int m
+    check_shapes("_ao", prim.shape[0], rays, t, prim, pixel, sample, slot, thr, radiance)
+    if normals.shape[1] != 3 or not 1 <= samples <= MAX_SAMPLES:
+        raise ValueError(f"_ao: normals (m, 3) and samples 1..{MAX_SAMPLES} expected")
+    check_new_rays("_ao", "AO", ao_rays, ao_parent, ao_weight)
+    if ao_slot.shape[0] < ao_parent.shape[0]:
+        raise ValueError("_ao: ao_slot must hold a value per AO ray's parent")
     with nogil:
         m = ao_batch(rays, t, prim, normals, pixel, sample, slot, thr, samples, distance,
                      background, seed, radiance, ao_rays, ao_parent, ao_slot, ao_weight)

@@ -7,7 +7,8 @@ from raysort._rng cimport seed_key, uniform_at
 from raysort._types cimport (RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX,
                              RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH, rs_prefetch,
                              rs_prefetchw)
-from raysort.shaders._shading cimport (LANES, RS_SW, HitBlock, checked_hits, consecutive,
+from raysort.shaders._shading cimport (LANES, RS_SW, HitBlock, checked_hits, check_shapes,
+                                       check_new_rays, consecutive,
                                        take_rays, take_keys, rs_mask64, rs_list_valid,
                                        rs_record_columns, leave_surfaces, cosine_directions,
                                        keep_lanes, write_ray, write_rays)
@@ -409,9 +410,23 @@ def _shade(const float[:, ::1] rays, const float[::1] t, const int32_t[::1] prim
            int32_t[::1] sh_slot, float[:, ::1] sh_contrib):
     """Typed entry point: shade a batch without the GIL; returns (next rays, shadow rays,
     whether a new path breaks the Bounce contract: a parent out of order or range, a
-    weight not finite, a slot out of range)."""
+    weight not finite, a slot out of range).  ValueError at arrays of inconsistent shapes;
+    trusts the values that ``LambertShader.shade`` checks (``checked_hits``) or makes:
+    prim (a row of ``faces``), slot (of ``radiance``), the records' emitter rows (of
+    ``emitters``: ``_face_records``), room for a next ray per hit and a shadow ray per hit
+    and light."""
     cdef ShadeParams prm = ShadeParams(depth, max_depth, seed, russian_roulette, rr_depth)
     cdef int k = 0, m = 0, bad = 0
+    check_shapes("_shade", prim.shape[0], rays, t, prim, pixel, sample, slot, thr, radiance)
+    if (faces.shape[1] != FACE_FLOATS or emitters.shape[1] < 3 or sky.shape[0] < 3
+            or light_pos.shape[1] != 3 or light_int.shape[0] != light_pos.shape[0]
+            or light_int.shape[1] != 3):
+        raise ValueError("_shade: faces (m, FACE_FLOATS), emitters (k, >= 3), sky (3,) and "
+                         "light_pos, light_int (lights, 3) expected")
+    check_new_rays("_shade", "next", next_rays, next_parent, next_thr)
+    check_new_rays("_shade", "shadow", sh_rays, sh_parent, sh_contrib)
+    if sh_slot.shape[0] < sh_parent.shape[0]:
+        raise ValueError("_shade: sh_slot must hold a value per shadow ray's parent")
     with nogil:
         shade_batch(rays, t, prim, faces, emitters, sky, pixel, sample, slot, thr,
                     prm, light_pos, light_int, radiance, next_rays, next_parent, next_thr,

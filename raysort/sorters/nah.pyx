@@ -17,7 +17,8 @@ inactive.
 """
 from libc.stdint cimport int32_t, uint8_t
 from libc.math cimport INFINITY, fabsf
-from raysort._types cimport rs_minf, rs_maxf, RS_RAY_OX, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ
+from raysort._types cimport (rs_minf, rs_maxf, RS_RAY_OX, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ,
+                             RS_RAY_ROWS)
 
 import numpy as np
 
@@ -187,12 +188,29 @@ def _sort(const float[:, ::1] rays, const int32_t[::1] packets, const float[::1]
           float threshold, int max_axes, int packet_size, int32_t[::1] order,
           int32_t[::1] offsets,
           uint8_t[::1] bucket_out=None, uint8_t[::1] cell_out=None):
-    """Sort every large packet; returns the number of sub-packets (offsets gets them + end)."""
-    cdef int p, n_sub = 0, widest = 0
-    cdef uint8_t *bucket_ptr = &bucket_out[0] if bucket_out is not None else NULL
-    cdef uint8_t *cell_ptr = &cell_out[0] if cell_out is not None else NULL
+    """Sort every large packet; returns the number of sub-packets (offsets gets them + end).
+    ValueError unless ``packets`` ascend from 0 (checked in the pass that finds the widest)
+    to an n that ``rays``, ``order``, ``offsets`` (n + 1), ``bucket_out`` and ``cell_out``
+    hold, ``root_extent`` has 3 values and ``packet_size`` >= 1."""
+    cdef int p, n_sub = 0, widest = 0, descending = 0
+    cdef Py_ssize_t n
+    if packets.shape[0] < 1 or root_extent.shape[0] < 3 or packet_size < 1 \
+            or rays.shape[0] != RS_RAY_ROWS:
+        raise ValueError("_sort: rays (RS_RAY_ROWS, capacity), packets of 1 boundary or more, "
+                         "root_extent of 3 values and packet_size >= 1 expected")
+    n = packets[packets.shape[0] - 1]
+    if (packets[0] != 0 or n > rays.shape[1] or n > order.shape[0] or n >= offsets.shape[0]
+            or (bucket_out is not None and bucket_out.shape[0] < n)
+            or (cell_out is not None and cell_out.shape[0] < n)):
+        raise ValueError(f"_sort: packets must run from 0 to n = {n}, and rays, order, "
+                         f"offsets (n + 1), bucket_out and cell_out hold them")
     for p in range(packets.shape[0] - 1):
         widest = max(widest, packets[p + 1] - packets[p])
+        descending |= packets[p + 1] < packets[p]
+    if descending:
+        raise ValueError("_sort: packets must not descend")
+    cdef uint8_t *bucket_ptr = &bucket_out[0] if bucket_out is not None else NULL
+    cdef uint8_t *cell_ptr = &cell_out[0] if cell_out is not None else NULL
     key = np.empty(max(widest, 1), dtype=np.uint8)
     cdef uint8_t[::1] key_mv = key
     with nogil:

@@ -114,6 +114,15 @@ def _tree(bvh, int width):
     raise ConfigError(f"tree must be 4 or 8; got {width!r}")
 
 
+cdef int check_stream(str name, int stream_size, int order) except -1:
+    """ValueError naming ``name`` unless ``stream_size`` is 1..MAX_STREAM (a stream's
+    scratch holds that many rays) and ``order`` one of ``ORDERS``."""
+    if not 1 <= stream_size <= MAX_STREAM or order not in (RS_ORDER_DIRECTION, RS_ORDER_VOTES):
+        raise ValueError(f"{name}: stream_size 1..{MAX_STREAM} and an order of ORDERS "
+                         f"expected, got {stream_size} and {order}")
+    return 0
+
+
 cdef _counters(const rs_counters *c, const rs_stream_scratch *w, long long active):
     """The Counters of a call: ``c``, and the stream sizes per level in ``w``."""
     cdef int levels = w.depth + 1
@@ -129,6 +138,7 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
     """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa);
     with ``frustum`` (8-wide tree only) coherent chunks of a sub-packet take the
     ``frustum`` traversal's walk and only the others join the streams."""
+    check_stream("trace", stream_size, order)
     check_packet_layout(packets)
     cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
     cdef int n_packets = starts.shape[0]
@@ -223,7 +233,10 @@ def trace_batch(bvh, const float[:, ::1] src, const int32_t[::1] order,
     cdef rs_stream_scratch w
     cdef rs_frustum_entry *stack = NULL
     cdef int a, size
-    cdef uint32_t n_prim = len(bvh.faces)
+    cdef uint32_t n_prim
+    check_stream("trace_batch", stream_size, order_kind)
+    check_tree(bvh)
+    n_prim = len(bvh.faces)
     if src.shape[0] != RS_RAY_ROWS or src.shape[1] < n or n == 0:
         raise ValueError("trace_batch: src must hold the ray rows of the n >= 1 rays of order")
     if not (0 <= k0 <= k1 < offsets.shape[0]):
