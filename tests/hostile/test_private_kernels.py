@@ -9,7 +9,6 @@ process (a crash fails its case, not the test run), once for the ISA-independent
 and once per ISA this CPU runs for the kernels built per ISA.  Each run first makes
 valid calls of the same functions (``VALID``), which must pass.
 """
-import json
 import subprocess
 import sys
 import textwrap
