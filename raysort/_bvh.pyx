@@ -29,7 +29,6 @@ from libc.math cimport INFINITY, fabs, ldexp
 from raysort._types cimport (rs_node, rs_node4, rs_node8, rs_tri, rs_tri8, rs_minf, rs_maxf,
                              RS_DEGENERATE_SIN2)
 
-import numpy as np
 
 cdef enum:
     MAX_BINS = 64

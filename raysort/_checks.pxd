@@ -76,7 +76,7 @@ cdef inline int packet_bounds(int32_t first, const int32_t *packets, Py_ssize_t 
 
 
 cdef inline int range_bad(const int32_t *order, Py_ssize_t a, Py_ssize_t b, int32_t lo,
-                           int32_t hi) noexcept nogil:
+                          int32_t hi) noexcept nogil:
     """Any of ``order[a:b]`` outside ``[lo, hi)`` (a loop the compiler vectorises)."""
     cdef Py_ssize_t i
     cdef int bad = 0
@@ -141,8 +141,8 @@ cdef inline int nonfinite(const float_bits *x, Py_ssize_t a, Py_ssize_t b) noexc
 
 
 cdef inline int parents_weights_bad(const int32_t *parent, const uint32_t *w0,
-                                   const uint32_t *w1, const uint32_t *w2, Py_ssize_t a,
-                                   Py_ssize_t b, uint32_t n) noexcept nogil:
+                                    const uint32_t *w1, const uint32_t *w2, Py_ssize_t a,
+                                    Py_ssize_t b, uint32_t n) noexcept nogil:
     """parent[a:b] in [0, n) and ascending (from parent[a - 1] when a > 0), and the
     float32 weights (as bits) w0, w1, w2 [a:b] finite, in one loop."""
     cdef Py_ssize_t i

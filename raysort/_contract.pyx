@@ -439,7 +439,7 @@ cdef int paths_kernel(const float *const *r, const int32_t *parent, const float 
     """Each part in its own loop over a block (which the compiler vectorises); a bad block
     is searched again for its first bad path.  ``r`` or ``slot`` NULL: not checked."""
     cdef Py_ssize_t a = 0, b, i
-    cdef int bad, c
+    cdef int bad
     while a < m:
         b = block_end(a, m)
         bad = parents_weights_bad(parent, <const uint32_t *> w[0], <const uint32_t *> w[1],

@@ -240,8 +240,8 @@ def gather(const float[:, ::1] src, const int32_t[::1] order, const int32_t[::1]
             or index.shape[0] != capacity or offsets.shape[0] != n_packets + 1):
         raise ValueError("gather: prim, u, v and index must hold one value per lane, "
                          "offsets one more than starts")
-    if n_packets and starts[n_packets - 1] + ((offsets[n_packets] - offsets[n_packets - 1] + 3)
-                                             & ~3) > capacity:
+    if n_packets and starts[n_packets - 1] + (
+            (offsets[n_packets] - offsets[n_packets - 1] + 3) & ~3) > capacity:
         raise ValueError("gather: the last sub-packet ends beyond the lanes")
     if offsets[0] != 0 or offsets[n_packets] != n or (n_packets and packets.shape[0] < 2):
         raise ValueError("gather: offsets must run from 0 to len(order), packets hold at "

@@ -2,9 +2,9 @@
 
 * :data:`NODE_DTYPE`, :data:`NODE4_DTYPE`, :data:`NODE8_DTYPE`, :data:`NODE16_DTYPE`,
   :data:`TRI_DTYPE`, :data:`TRI8_DTYPE`: NumPy structured dtypes of ``rs_node``,
-  ``rs_node4``, ``rs_node8``, ``rs_node16``, ``rs_tri`` and ``rs_tri8``, taken from a one-element Cython view of
-  each struct (the scikit-learn idiom), so field names, types and offsets are the C
-  compiler's;
+  ``rs_node4``, ``rs_node8``, ``rs_node16``, ``rs_tri`` and ``rs_tri8``, taken from a
+  one-element Cython view of each struct (the scikit-learn idiom), so field names, types
+  and offsets are the C compiler's;
 * :class:`RayRow`, :class:`PacketRow`: the row indices of ray batches and gathered
   packets (``rs_ray_row``, ``rs_packet_row``) with the names types.h gives them;
 * :data:`MAX_PACKET`, :data:`DEGENERATE_SIN2` and the random-number dimension budget.
@@ -22,8 +22,9 @@ from raysort._types cimport (rs_node, rs_node4, rs_node8, rs_node16, rs_tri, rs_
                              RS_DEGENERATE_SIN2, RS_DIM_JITTER_X, RS_DIM_JITTER_Y,
                              RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH, RS_DIM_AO)
 
-__all__ = ["NODE_DTYPE", "NODE4_DTYPE", "NODE8_DTYPE", "NODE16_DTYPE", "TRI_DTYPE", "TRI8_DTYPE", "RayRow",
-           "PacketRow", "MAX_PACKET", "DEGENERATE_SIN2", "RNG_DIMS", "c_layout"]
+__all__ = ["NODE_DTYPE", "NODE4_DTYPE", "NODE8_DTYPE", "NODE16_DTYPE", "TRI_DTYPE",
+           "TRI8_DTYPE", "RayRow", "PacketRow", "MAX_PACKET", "DEGENERATE_SIN2", "RNG_DIMS",
+           "c_layout"]
 
 cdef rs_node _node
 cdef rs_node4 _node4

@@ -222,7 +222,7 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                       float[:, ::1] sh_rays, int32_t[::1] sh_parent, int32_t[::1] sh_slot,
                       float[:, ::1] sh_contrib, int *n_next, int *n_shadow,
                       int *paths_bad) noexcept nogil:
-    cdef int n = prim.shape[0], blk, i0, i, f, c, h, j, line, count, k = 0, m = 0, e
+    cdef int n = prim.shape[0], blk, i0, i, c, h, j, line, count, k = 0, m = 0, e
     cdef int bad = 0                   # a new path breaks the Bounce contract (see below)
     cdef int k_done = 0, m_done = 0    # the new paths before these are checked
     cdef uint32_t slots = <uint32_t> radiance.shape[0]

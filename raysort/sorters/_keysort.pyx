@@ -44,7 +44,8 @@ from libc.math cimport INFINITY, copysignf, fabsf
 from libc.stdint cimport int32_t, int64_t, uint32_t, uint64_t
 from libc.string cimport memset
 cimport numpy as cnp
-from raysort._types cimport rs_maxf, rs_minf, RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX, RS_RAY_TMAX
+# rs_maxf and rs_minf: for the C below, which calls them
+from raysort._types cimport rs_maxf, rs_minf, RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX, RS_RAY_TMAX  # no-cython-lint
 
 import math
 
@@ -112,10 +113,10 @@ cdef extern from *:
             out[j] = 1.0f / sqrtf(x[j]);
     }
     /* q[j] = (int)(min(max(c[j], 0), 1) * 65535): a coordinate clamped to [0, 1] (NaN
-     * -> 0) and quantised to 16 bits (COORD_BITS: 65535 = 2^16 - 1).  MAXPS/MINPS return the second operand on NaN,
-     * as rs_maxf/rs_minf do, so every ISA gives the same q (sixteen at a time with
-     * AVX-512, eight with AVX2, four with SSE); written with intrinsics because the
-     * compiler leaves the branchy scalar form unvectorised. */
+     * -> 0) and quantised to 16 bits (COORD_BITS: 65535 = 2^16 - 1).  MAXPS/MINPS
+     * return the second operand on NaN, as rs_maxf/rs_minf do, so every ISA gives the
+     * same q (sixteen at a time with AVX-512, eight with AVX2, four with SSE); written
+     * with intrinsics because the compiler leaves the branchy scalar form unvectorised. */
     static inline void rs_keysort_quantise(const float *c, int32_t *q, int m)
     {
         int j = 0;
@@ -509,7 +510,7 @@ cdef void plan_lookups(KeyInputs *a, int n_coords) noexcept nogil:
         for ia in range(1 << u[k]):
             for ib in range(1 << u[best]):
                 a.pairs[l][ia << u[best] | ib] = (row_a[(ia << (8 - u[k])) & 0xFF]
-                                                   | row_b[(ib << (8 - u[best])) & 0xFF])
+                                                  | row_b[(ib << (8 - u[best])) & 0xFF])
 
 
 cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcept nogil:

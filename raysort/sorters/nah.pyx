@@ -278,8 +278,9 @@ class NahSorter(Sorter):
         n = len(rays)
         order = np.empty(max(n, 1), dtype=np.int32)
         offsets = np.empty(n + 1, dtype=np.int32)
-        n_sub = isa.module("sorters.nah")._sort(rays.data, packets, extent, threshold,
-                      max_cells.bit_length() - 1, packet_size, order, offsets, bucket, cell)
+        n_sub = isa.module("sorters.nah")._sort(
+            rays.data, packets, extent, threshold, max_cells.bit_length() - 1, packet_size,
+            order, offsets, bucket, cell)
         return order[:n], offsets[:n_sub + 1].copy()
 
     def sort(self, rays, packets, bounds):

@@ -11,7 +11,6 @@ than 16 active rays, directions that change sign on two axes or more, or spread 
 more than 0.25 in a component) is traced one ray at a time as ``wide8`` does.
 The kernel is ``raysort/include/raysort/frustum.h``.
 """
-from libc.stdint cimport int32_t
 from raysort._types cimport rs_node8, rs_tri8, rs_rays, rs_counters
 from raysort.sdk.driver cimport Kernel, Geometry, Scratch, run
 
@@ -42,8 +41,8 @@ cdef void trace_frustum(const Geometry *g, rs_rays *r, int start, int count, int
 
 # a node pops one box and pushes at most eight: 7 waiting boxes per level (the
 # driver's levels, the binary depth + 2, bound the 8-wide tree's depth + 1)
-cdef Kernel FRUSTUM = Kernel(trace_frustum, 7 * (sizeof(rs_frustum_entry) + sizeof(rs_stream_entry)),
-                             0, 0)
+cdef Kernel FRUSTUM = Kernel(trace_frustum,
+                             7 * (sizeof(rs_frustum_entry) + sizeof(rs_stream_entry)), 0, 0)
 
 
 def chunk():
@@ -85,4 +84,3 @@ class FrustumTraversal(Traversal):
 
     def intersect(self, bvh, packets, any_hit=False):
         return isa.module("traversals.frustum").trace(bvh, packets, any_hit)
-

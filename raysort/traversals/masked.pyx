@@ -7,7 +7,7 @@ mask the children inherit, and a node is entered if any lane hits.
 from libc.stdint cimport int32_t, uint8_t
 from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box4, rs_tri4, rs_active4
 from raysort.sdk.driver cimport (Kernel, Geometry, Scratch, run, stack_root, stack_pop,
-                                         push_children, lowest_bit, left_first)
+                                 push_children, lowest_bit, left_first)
 
 from raysort import isa
 from raysort.plugin import Traversal

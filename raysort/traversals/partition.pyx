@@ -13,7 +13,7 @@ from libc.stdint cimport int32_t
 from raysort._types cimport (rs_node, rs_rays, rs_frustum, rs_counters, rs_box4, rs_tri4,
                              rs_ia_miss, rs_active4)
 from raysort.sdk.driver cimport (Kernel, Geometry, Scratch, run, stack_root, stack_pop,
-                                         push_children, lowest_bit, left_first, frustum_of)
+                                 push_children, lowest_bit, left_first, frustum_of)
 
 from raysort import isa
 from raysort.plugin import Traversal

@@ -11,9 +11,9 @@ from libc.stdint cimport int32_t
 from raysort._types cimport (rs_node, rs_rays, rs_frustum, rs_counters, rs_box1, rs_box4,
                              rs_ia_miss, rs_active4)
 from raysort.sdk.driver cimport (Kernel, Geometry, Scratch, run, stack_root, stack_pop,
-                                         push_children, active, align_up, align_down,
-                                         lowest_bit, highest_bit, left_first, frustum_of,
-                                         leaf_range)
+                                 push_children, active, align_up, align_down,
+                                 lowest_bit, highest_bit, left_first, frustum_of,
+                                 leaf_range)
 
 from raysort import isa
 from raysort.plugin import Traversal

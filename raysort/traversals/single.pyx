@@ -1,8 +1,8 @@
 """``single``: one ray at a time, the scalar reference traversal."""
 from libc.stdint cimport int32_t
-from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box1, rs_tri1, rs_prefetch
+from raysort._types cimport rs_node, rs_rays, rs_counters, rs_box1, rs_prefetch
 from raysort.sdk.driver cimport (Kernel, Geometry, Scratch, run, active, left_first,
-                                         prefetch_leaf, leaf_ray)
+                                 prefetch_leaf, leaf_ray)
 
 from raysort import isa
 from raysort.plugin import Traversal
@@ -11,7 +11,7 @@ from raysort.plugin import Traversal
 cdef void trace_single(const Geometry *g, rs_rays *r, int start, int count, int any_hit,
                        Scratch *w, rs_counters *counters) noexcept nogil:
     cdef rs_counters c = counters[0]    # a local copy stays in registers
-    cdef int i, k, node, sp
+    cdef int i, node, sp
     cdef const rs_node *n
     cdef int32_t *stack = <int32_t *> w.stack
     for i in range(start, start + count):

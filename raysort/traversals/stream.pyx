@@ -31,7 +31,7 @@ so streams stay large deeper in the tree).
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.stdlib cimport malloc, free
 from raysort._checks cimport offsets_bad
-from raysort._types cimport (rs_node4, rs_node8, rs_tri, rs_tri8, rs_rays, rs_counters, rays_view,
+from raysort._types cimport (rs_node8, rs_tri8, rs_rays, rs_counters, rays_view,
                              RS_MAX_PACKET, RS_RAY_ROWS)
 from raysort.sdk.driver cimport check_packet_layout
 
@@ -142,7 +142,7 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
     check_packet_layout(packets)
     cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
     cdef int n_packets = starts.shape[0]
-    cdef int k, i, m, size, ok, levels, s, e
+    cdef int k, i, m, size, s, e
     cdef rs_frustum_bounds bounds
     cdef rs_frustum_entry *chunk_stack = NULL
     cdef long long active = 0
@@ -350,7 +350,6 @@ class StreamTraversal(Traversal):
         return isa.module("traversals.stream").trace(bvh, packets, any_hit, self.stream_size,
                                                      ORDERS[self.order], self.min_stream,
                                                      self.tree, self.frustum)
-
 
     def _intersect_batch(self, bvh, rays, order, offsets, k0, k1, any_hit, out):
         """The pipeline's path without packets (raysort.pipeline, ``_reads_batch``):

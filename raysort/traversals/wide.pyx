@@ -9,8 +9,7 @@ decision a new slab test would make).  Each lane of the 4-wide test performs
 ``rs_box1``'s arithmetic on one child box and triangles use ``rs_tri1``, so
 the hits equal brute force bit for bit.
 """
-from libc.stdint cimport int32_t
-from raysort._types cimport rs_node4, rs_rays, rs_counters, rs_tri1, rs_node4_hit, rs_prefetch
+from raysort._types cimport rs_node4, rs_rays, rs_counters, rs_node4_hit, rs_prefetch
 from raysort.sdk.driver cimport (Kernel, Geometry, Scratch, Waiting, run, active, leaf_ray,
                                  insert_nearest_first, pop_nearest)
 
