@@ -823,25 +823,26 @@ def write_render(path, image, *, metadata=None, exposure=0.0, png=True, channels
         As :func:`write_exr` and :func:`write_png`.
     OutputError
         If a file cannot be written; no target is then changed.
+    ConfigError
+        If a sidecar is the image, its preview or another sidecar.
     """
     path = os.fspath(path)
+    if os.path.splitext(path)[1].lower() != ".exr":
+        raise OutputError(f"cannot write {_q(path)}: a render is written to an .exr file")
     sidecars = {os.fspath(p): text for p, text in (sidecars or {}).items()}
-    outputs = [path, os.path.splitext(path)[0] + ".png"] if png else [path]
     for side, text in sidecars.items():
         if not isinstance(text, str):
             raise TypeError(f"sidecar {_q(side)}: text (str) expected, got {type(text).__name__}")
-        if any(os.path.realpath(side) == os.path.realpath(o) for o in outputs):
-            raise OutputError(f"cannot write {_q(side)}: it is one of the render's own files")
-        outputs.append(side)
-    if os.path.splitext(path)[1].lower() != ".exr":
-        raise OutputError(f"cannot write {_q(path)}: a render is written to an .exr file")
+    png_path = os.path.splitext(path)[0] + ".png"
+    check_distinct([("write_render", "the image", path),
+                    ("write_render", "the preview", png_path if png else None)]
+                   + [("a sidecar", "a sidecar", side) for side in sidecars])
     image, exposure, metadata = _as_rgb_float32(image), _check_exposure(exposure), metadata or {}
     _check_metadata(metadata)
     extra = _check_channels(channels or {}, image.shape[:2])
     render_id = _render_id(image, metadata, exposure if png else None, extra)
     stamp = {"raysort.render_id": render_id}
     exr = _prepared_exr(image, dict(metadata, **stamp), extra)
-    png_path = os.path.splitext(path)[0] + ".png"
     picture = _png_picture(image, exposure) if png else None
     with contextlib.ExitStack() as temporaries:
         renames = [(temporaries.enter_context(_temporary(path)), path)]

@@ -12,7 +12,7 @@ import pytest
 from PIL import Image
 
 from raysort import output
-from raysort.errors import OutputError, RaysortError
+from raysort.errors import ConfigError, OutputError, RaysortError
 
 OpenEXR = pytest.importorskip("OpenEXR")
 
@@ -360,9 +360,13 @@ def test_write_render_writes_its_sidecars_with_it(tmp_path, monkeypatch):
         output.write_render(exr, np.zeros((2, 2, 3)), sidecars={js: "{}"})
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
     monkeypatch.undo()
-    for side in (exr, tmp_path / "r.png", tmp_path / "." / "r.exr"):
-        with pytest.raises(OutputError, match="one of the render's own files"):
+    for side, other in ((exr, "the image"), (tmp_path / "r.png", "the preview"),
+                        (tmp_path / "." / "r.exr", "the image")):
+        with pytest.raises(ConfigError, match=f"a sidecar '{side}' is {other}"):
             output.write_render(exr, np.zeros((2, 2, 3)), sidecars={side: "{}"})
+    with pytest.raises(ConfigError, match="is a sidecar"):
+        output.write_render(exr, np.zeros((2, 2, 3)),
+                            sidecars={js: "{}", f"{tmp_path}/./r.json": ""})
     with pytest.raises(TypeError, match="str"):
         output.write_render(exr, np.zeros((2, 2, 3)), sidecars={js: b"{}"})
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
