@@ -776,8 +776,8 @@ cdef int check_mesh(str name, const float[:, ::1] vertices,
     return 0
 
 
-cdef Py_ssize_t check_tree(str name, const unsigned char[::1] node_bytes,
-                           Py_ssize_t n_tris) except -1:
+cdef Py_ssize_t check_layout(str name, const unsigned char[::1] node_bytes,
+                             Py_ssize_t n_tris) except -1:
     """The ``rs_tri8`` groups the leaves of ``node_bytes`` fill (a leaf's triangles in
     groups of 8); ValueError naming ``name`` unless it holds whole nodes, at least one,
     laid out as the builder lays them: depth first (inner node b: left child b + 1, right
@@ -824,10 +824,10 @@ cdef Py_ssize_t check_tree(str name, const unsigned char[::1] node_bytes,
 
 def collapse(const unsigned char[::1] node_bytes, unsigned char[::1] out_bytes):
     """Collapse binary nodes into 4-wide nodes; returns (count, depth).  ValueError unless
-    the nodes form a tree as the builder lays it out (see :func:`check_tree`) and
+    the nodes form a tree as the builder lays it out (see :func:`check_layout`) and
     ``out_bytes`` has room for as many 4-wide nodes."""
     cdef int n_nodes = node_bytes.shape[0] // sizeof(rs_node), n_out, depth = 0
-    check_tree("collapse", node_bytes, 2147483647)
+    check_layout("collapse", node_bytes, 2147483647)
     if out_bytes.shape[0] < n_nodes * <Py_ssize_t> sizeof(rs_node4):
         raise ValueError(f"collapse: out_bytes must have room for {n_nodes} 4-wide nodes")
     with nogil:
@@ -878,7 +878,7 @@ def refit(const float[:, ::1] vertices, const int32_t[:, ::1] faces, const int32
     """Move the triangles to new vertex positions and refit every box (a leaf's box from
     its triangles' whole boxes, also where spatial splits had cut them).  ValueError at a
     mesh :func:`check_mesh` refuses, an ``order`` entry that is no face, nodes that are
-    no tree of ``order``'s references (:func:`check_tree`) or a ``tri_bytes`` too small."""
+    no tree of ``order``'s references (:func:`check_layout`) or a ``tri_bytes`` too small."""
     cdef int n = order.shape[0]
     cdef int n_nodes = node_bytes.shape[0] // sizeof(rs_node)
     cdef Py_ssize_t i, m = faces.shape[0], bad = -1
@@ -890,7 +890,7 @@ def refit(const float[:, ::1] vertices, const int32_t[:, ::1] faces, const int32
                 break
     if bad >= 0:
         raise ValueError(f"refit: order[{bad}] = {order[bad]} is not a face of the {m}")
-    check_tree("refit", node_bytes, n)
+    check_layout("refit", node_bytes, n)
     if tri_bytes.shape[0] < n * <Py_ssize_t> sizeof(rs_tri):
         raise ValueError(f"refit: tri_bytes must have room for the {n} triangles of order")
     with nogil:
@@ -1089,13 +1089,13 @@ def collapse8(const unsigned char[::1] node_bytes, const unsigned char[::1] tri_
               double node_cost, double group_cost, int max_leaf):
     """Collapse binary nodes into 8-wide nodes and SoA leaf groups;
     returns (nodes, groups, depth, SAH cost).  ValueError unless the nodes form a tree
-    of the triangles of ``tri_bytes`` as the builder lays it out (:func:`check_tree`),
+    of the triangles of ``tri_bytes`` as the builder lays it out (:func:`check_layout`),
     ``out_bytes`` has room for as many 8-wide nodes and ``group_bytes`` for the groups
     of its leaves."""
     cdef int n_nodes = node_bytes.shape[0] // sizeof(rs_node), n_out, n_groups = 0, depth = 0
     cdef double sah = 0
-    cdef Py_ssize_t groups = check_tree("collapse8", node_bytes,
-                                        tri_bytes.shape[0] // sizeof(rs_tri))
+    cdef Py_ssize_t groups = check_layout("collapse8", node_bytes,
+                                          tri_bytes.shape[0] // sizeof(rs_tri))
     if (out_bytes.shape[0] < n_nodes * <Py_ssize_t> sizeof(rs_node8)
             or group_bytes.shape[0] < groups * <Py_ssize_t> sizeof(rs_tri8)):
         raise ValueError(f"collapse8: out_bytes must have room for {n_nodes} 8-wide nodes "
