@@ -1,6 +1,6 @@
 """``lambert``: a Lambertian path tracer (cosine-weighted diffuse bounces)."""
 from libc.math cimport sqrtf, M_PI, INFINITY
-from libc.string cimport memcpy, memmove
+from libc.string cimport memmove
 from libc.stdint cimport int32_t, uint32_t, uint64_t
 from raysort._checks cimport parents_weights_bad, slots_bad
 from raysort._rng cimport seed_key, uniform_at
@@ -8,7 +8,7 @@ from raysort._types cimport (RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX,
                              RS_DIM_BOUNCE, RS_DIMS_PER_BOUNCE, RS_MAX_DEPTH, rs_prefetch,
                              rs_prefetchw)
 from raysort.shaders._shading cimport (LANES, RS_SW, HitBlock, checked_hits, check_shapes,
-                                       check_new_rays, consecutive,
+                                       check_new_rays, consecutive, copy_lanes,
                                        take_rays, take_keys, rs_mask64, rs_list_valid,
                                        rs_record_columns, leave_surfaces, cosine_directions,
                                        keep_lanes, write_ray, write_rays)
@@ -175,8 +175,8 @@ cdef int light_lanes(HitBlock *b, float reflect[3][LANES], const int32_t *hit_sl
             row = &sh_contrib[c, m]
             for j in range(count):
                 row[j] = reflect[c][j] * intensity * weight[j]
-        memcpy(&sh_parent[m], b.ray, count * sizeof(int32_t))
-        memcpy(&sh_slot[m], hit_slot, count * sizeof(int32_t))
+        copy_lanes(&sh_parent[m], b.ray, count)
+        copy_lanes(&sh_slot[m], hit_slot, count)
     else:                   # the lit lanes, a vector at a time
         for c in range(3):
             intensity = light_int[0, c]
@@ -320,8 +320,8 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
         if consecutive(&b):         # every ray of the block hit: copies of the rows
             i = b.ray[0]
             for c in range(3):
-                memcpy(reflect[c], &thr[c, i], b.n * sizeof(float))
-            memcpy(hit_slot, &slot[i], b.n * sizeof(int32_t))
+                copy_lanes(reflect[c], &thr[c, i], b.n)
+            copy_lanes(hit_slot, &slot[i], b.n)
         else:
             for h in range(b.n):
                 i = b.ray[h]
@@ -371,8 +371,8 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
         write_rays(&b, keep, count, next_rays, k, 1)
         if count == b.n:            # every lane: copies
             for c in range(3):
-                memcpy(&next_thr[c, k], reflect[c], count * sizeof(float))
-            memcpy(&next_parent[k], b.ray, count * sizeof(int32_t))
+                copy_lanes(&next_thr[c, k], reflect[c], count)
+            copy_lanes(&next_parent[k], b.ray, count)
         else:
             for c in range(3):
                 keep_lanes(reflect[c], b.n, keep, &next_thr[c, k], count)
