@@ -36,8 +36,10 @@ __all__ = ["BVH", "Wide8", "Wide16", "PRESETS", "NODE_DTYPE", "NODE4_DTYPE", "NO
 #: named sets of build parameters (``BVH(..., preset="manta")``, ``bvh={"preset": "manta"}``,
 #: ``raysort bench --bvh manta``); parameters given next to a preset override it.
 PRESETS = {
-    # binned SAH with DynBVH's costs (C_trav = C_isec = 1): leaves of ~2 triangles
-    "default": {"max_leaf": 8, "bins": 16, "traversal_cost": 1.0, "spatial_splits": 0.0,
+    # binned SAH with DynBVH's costs (C_trav = C_isec = 1): leaves of ~2 triangles, and
+    # spatial splits up to 10 % more references (whole frames 1.01-1.07x faster with
+    # `stream`, 1.03-1.19x with `wide8`; BENCHMARKS.md §12)
+    "default": {"max_leaf": 8, "bins": 16, "traversal_cost": 1.0, "spatial_splits": 0.1,
                 "split_alpha": 1e-3},
     # leaves of tens of triangles, as the paper's Manta counts imply: its Table I has
     # about ten triangle tests per box test (Sibenik: 16 ranged, 5.5 partition, 7 ranged
@@ -120,13 +122,14 @@ class BVH:
     traversal_cost : float, default 1.0
         SAH cost of visiting a node relative to one triangle test (DynBVH: 1);
         larger values make shallower trees with bigger leaves.
-    spatial_splits : float, default 0.0
+    spatial_splits : float, default 0.1
         the reference budget of spatial splits (SBVH, Stich et al. 2009): a
         node may be split by a plane that cuts triangles, each cut triangle
         then sits in both children, so that long or diagonal triangles stop
         bloating the boxes; the leaves hold at most ``(1 + spatial_splits)``
         times as many triangle references as the mesh has triangles (0: no
-        spatial splits, the plain binned-SAH tree; 0..4).
+        spatial splits, the plain binned-SAH tree, which the ``manta`` preset
+        keeps; 0..4).
     split_alpha : float, default 1e-3
         spatial splits are tried only in nodes whose best object split's
         children overlap by more than ``split_alpha`` times the root's surface

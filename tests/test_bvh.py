@@ -2,7 +2,9 @@
 
 Every structural property is checked against values recomputed here from the
 mesh with NumPy (float32 min/max of the vertices, a fresh walk of the node
-array), never against an earlier output of the builder.
+array), never against an earlier output of the builder.  The structure checked
+here is the plain binned-SAH tree's (``PLAIN``: each triangle in one leaf, boxes
+of whole triangles); the default tree's spatial splits are test_bvh_spatial.py's.
 """
 import numpy as np
 import pytest
@@ -14,6 +16,10 @@ from raysort.rays import gather, scatter
 from raysort.reference import brute_force
 
 from _helpers import assert_same_hits, exact_traversals, random_rays
+
+
+#: the plain binned-SAH tree, without the default's spatial splits
+PLAIN = {"spatial_splits": 0.0}
 
 
 # ---------------------------------------------------------------------------
@@ -128,15 +134,16 @@ def trace(name, bvh, rays, size, rng):
 # ---------------------------------------------------------------------------
 
 def test_real_scene_structure(real_scene):
-    """Sibenik and Sponza build (default parameters) into a valid, tight, depth-first BVH."""
-    bvh = BVH(real_scene.vertices, real_scene.faces)
+    """Sibenik and Sponza build (the default parameters but spatial splits) into a valid,
+    tight, depth-first BVH."""
+    bvh = BVH(real_scene.vertices, real_scene.faces, **PLAIN)
     check_structure(bvh, real_scene.vertices, real_scene.faces, max_leaf=8)
 
 
 def test_sibenik_builds_with_other_parameters(sibenik):
     """Sibenik also builds with max_leaf=1, few bins and a high traversal cost."""
     for params in ({"max_leaf": 1}, {"bins": 2, "max_leaf": 4}, {"traversal_cost": 8.0}):
-        bvh = BVH(sibenik.vertices, sibenik.faces, **params)
+        bvh = BVH(sibenik.vertices, sibenik.faces, **params, **PLAIN)
         check_structure(bvh, sibenik.vertices, sibenik.faces, params.get("max_leaf", 8))
 
 
@@ -180,7 +187,7 @@ def test_random_soup_structure(rng, max_leaf, bins, cost):
     """Random soups (with zero-area triangles) satisfy every invariant for any parameters."""
     for m in (1, 2, 3, 17, 500):
         V, F = triangle_soup(rng, m)
-        bvh = BVH(V, F, max_leaf=max_leaf, bins=bins, traversal_cost=cost)
+        bvh = BVH(V, F, max_leaf=max_leaf, bins=bins, traversal_cost=cost, **PLAIN)
         check_structure(bvh, V, F, max_leaf)
 
 
@@ -217,7 +224,7 @@ def test_coincident_centroids():
     V = np.array(corners, np.float32)
     F = np.arange(len(V), dtype=np.int32).reshape(-1, 3)
     for max_leaf in (1, 4, 8):
-        bvh = BVH(V, F, max_leaf=max_leaf)
+        bvh = BVH(V, F, max_leaf=max_leaf, **PLAIN)
         check_structure(bvh, V, F, max_leaf)
 
 
@@ -225,7 +232,7 @@ def test_duplicate_triangles():
     """The same triangle repeated 50 times (identical boxes) is stored 50 times."""
     V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
     F = np.zeros((50, 3), np.int32) + [0, 1, 2]
-    bvh = BVH(V, F, max_leaf=3)
+    bvh = BVH(V, F, max_leaf=3, **PLAIN)
     check_structure(bvh, V, F, 3)
 
 
@@ -237,7 +244,7 @@ def test_duplicate_triangles():
 def test_refit_soup(rng, motion):
     """Refit after moving vertices gives tight boxes on the new mesh and brute-force hits."""
     V, F = triangle_soup(rng, 400)
-    bvh = BVH(V, F, max_leaf=4)
+    bvh = BVH(V, F, max_leaf=4, **PLAIN)
     before = bvh.nodes[["offset", "count", "axis"]].copy()
     order, depth = bvh.order.copy(), bvh.depth
     if motion == "affine":
@@ -262,7 +269,7 @@ def test_refit_soup(rng, motion):
 def test_refit_real_scene(sibenik, rng):
     """Refit of Sibenik after a translate + scale keeps every box tight and hits exact."""
     V, F = sibenik.vertices, sibenik.faces
-    bvh = BVH(V, F)
+    bvh = BVH(V, F, **PLAIN)
     W = (V * np.float32(0.75) + np.float32([1, 2, -3])).astype(np.float32)
     bvh.refit(W)
     check_structure(bvh, W, F, 8)
@@ -275,7 +282,7 @@ def test_refit_real_scene(sibenik, rng):
 def test_refit_back_restores_the_build(rng):
     """Moving the vertices away and back gives exactly the boxes of the original build."""
     V, F = triangle_soup(rng, 200)
-    bvh = BVH(V, F)
+    bvh = BVH(V, F, **PLAIN)
     original = bvh.nodes.copy(), bvh.triangles.copy()
     bvh.refit((V * 3 - 1).astype(np.float32))
     bvh.refit(V)
@@ -362,6 +369,7 @@ def _check_wide(bvh):
     assert wide.dtype == raysort.bvh.NODE4_DTYPE and wide.ctypes.data % 16 == 0
     leaf = nodes["count"] > 0
     binary_leaves = sorted(zip(nodes["offset"][leaf].tolist(), nodes["count"][leaf].tolist()))
+    leaf_at = dict(zip(nodes["offset"][leaf].tolist(), np.flatnonzero(leaf).tolist()))
     wide_leaves, inner_refs, depth = [], [], {0: 1}
     for w, node in enumerate(wide):
         for k in range(4):
@@ -369,10 +377,14 @@ def _check_wide(bvh):
             lo, hi = node["lo"][:, k], node["hi"][:, k]
             if child < 0:
                 wide_leaves.append((-child - 1, count))
-                # a leaf child's box is exactly the box of its triangles
-                tv = bvh.vertices[bvh.faces[bvh.order[-child - 1:-child - 1 + count]]]
-                assert np.array_equal(lo, tv.reshape(-1, 3).min(axis=0))
-                assert np.array_equal(hi, tv.reshape(-1, 3).max(axis=0))
+                # a leaf child's box is exactly its binary leaf's: in the plain tree the
+                # box of its triangles (with spatial splits, of their parts in the leaf)
+                b = leaf_at[-child - 1]
+                assert np.array_equal(lo, nodes["lo"][b]) and np.array_equal(hi, nodes["hi"][b])
+                if bvh.references == len(bvh.faces):
+                    tv = bvh.vertices[bvh.faces[bvh.order[-child - 1:-child - 1 + count]]]
+                    assert np.array_equal(lo, tv.reshape(-1, 3).min(axis=0))
+                    assert np.array_equal(hi, tv.reshape(-1, 3).max(axis=0))
             elif child > 0:
                 assert count == 0 and child > w, "children follow their parent"
                 inner_refs.append(child)
@@ -391,7 +403,8 @@ def _check_wide(bvh):
 
 def test_wide_collapse_of_real_scenes(sibenik, sponza):
     for scene in (sibenik, sponza):
-        _check_wide(scene.bvh())
+        _check_wide(scene.bvh())                    # the default: with spatial splits
+        _check_wide(BVH(scene.vertices, scene.faces, **PLAIN))
 
 
 def test_wide_collapse_of_tiny_trees():

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import raysort
-from raysort.bvh import BVH, MAX_SPATIAL_SPLITS
+from raysort.bvh import BVH, MAX_SPATIAL_SPLITS, PRESETS
 from raysort.errors import ConfigError
 from raysort.rays import gather, scatter_occluded
 from raysort.reference import brute_force
@@ -147,12 +147,14 @@ def big_triangle_scene(rng):
 # structure
 # ---------------------------------------------------------------------------
 
-@pytest.mark.parametrize("budget", [0.1, 0.5, MAX_SPATIAL_SPLITS])
+@pytest.mark.parametrize("budget", [None, 0.5, MAX_SPATIAL_SPLITS])
 def test_real_scene_structure(real_scene, budget):
-    """Sibenik and Sponza with spatial splits: every invariant, references within budget,
-    and some triangles referenced twice or more."""
+    """Sibenik and Sponza with spatial splits (None: the default build's): every
+    invariant, references within budget, and some triangles referenced twice or more."""
     V, F = real_scene.vertices, real_scene.faces
     bvh = BVH(V, F, spatial_splits=budget)
+    budget = PRESETS["default"]["spatial_splits"] if budget is None else budget
+    assert bvh.spatial_splits == budget > 0
     check_spatial_structure(bvh, V, F, budget, max_leaf=8)
     assert bvh.references > len(F)
 
@@ -175,7 +177,7 @@ def test_alpha_one_or_no_budget_gives_the_plain_tree(rng):
     """split_alpha=1 (no node's overlap exceeds the root's area) or a budget too small for
     one more reference: no spatial split, the same tree as without."""
     V, F = needles(rng)
-    plain = BVH(V, F)
+    plain = BVH(V, F, spatial_splits=0)
     for params in ({"spatial_splits": 1.0, "split_alpha": 1.0},
                    {"spatial_splits": 0.5 / len(F)}):
         bvh = BVH(V, F, **params)

@@ -2,23 +2,26 @@
 
     python tests/benchmarks/spatial_splits.py [scene ...] [--budgets 0,0.1,0.3,1]
                                               [--alpha A] [--traversals wide8,wide]
-                                              [--kinds diffuse,frame] [--rounds 7]
+                                              [--kinds diffuse,camera,frame]
+                                              [--sorter nah] [--rounds 7]
                                               [--size 256] [--json out.json]
 
 For each scene (default: sibenik, sponza, forest) and each ``spatial_splits`` reference
-budget (0: no spatial splits, the baseline), with ``split_alpha`` ``--alpha`` (default: the
-BVH's), the BVH is built ``--build-rounds`` times in interleaved rounds (the thread's CPU
-time, median [min, max]) and its SAH cost (binary, ``BVH.stats``; wide8,
-``Wide8.sah_cost``) and reference count are reported.  Then, for every budget x traversal
-(sorter ``nah``, one thread, checks off), ``diffuse`` traces the first-bounce diffuse rays
-of a ``--size`` square render at 1 spp (:func:`raysort.workloads.workload`) through
-``Pipeline.trace``, and ``frame`` renders a ``--size`` square frame at 4 spp (lambert,
-depth 2) with ``Pipeline.render``; each in interleaved rounds shuffled per round after an
-untimed warm-up round (:func:`raysort.bench.rounds.run_rounds`), timed by the thread's CPU
-clock.  Reported: Mrays/s (Mpixels/s) median [min, max] and the median [min, max] of the
-per-round speed ratios over the first budget with the same traversal.  Every
-configuration's hits (t bit for bit, prim) or image must equal the first one's, or the run
-fails.  The header names the CPU, the ISA and the load average.
+budget (0: no spatial splits, the baseline), with ``split_alpha`` ``--alpha`` (default:
+the BVH's), the BVH is built ``--build-rounds`` times in interleaved rounds (the thread's
+CPU time, median [min, max]) and its SAH cost (binary, ``BVH.stats``; wide8,
+``Wide8.sah_cost``) and reference count are reported. Then, for every budget x traversal
+(sorter ``--sorter``, default ``nah``; one thread, checks off), ``diffuse`` traces the
+first-bounce diffuse rays of a ``--size`` square render at 1 spp
+(:func:`raysort.workloads.workload`) through ``Pipeline.trace``, ``camera`` its primary
+rays (:func:`raysort.workloads.camera_rays`, 32x32 tiles), and ``frame`` renders a
+``--size`` square frame at 4 spp (lambert, depth 2) with ``Pipeline.render``; each in
+interleaved rounds shuffled per round after an untimed warm-up round
+(:func:`raysort.bench.rounds.run_rounds`), timed by the thread's CPU clock. Reported:
+Mrays/s (Mpixels/s) median [min, max] and the median [min, max] of the per-round speed
+ratios over the first budget with the same traversal. Every configuration's hits (t bit
+for bit, prim) or image must equal the first one's, or the run fails. The header names the
+CPU, the ISA and the load average.
 """
 import argparse
 import json
@@ -32,7 +35,11 @@ from raysort.bench.report import load_average, machine_info
 from raysort.bench.rounds import ratios, run_rounds, summary
 from raysort.bvh import BVH
 from raysort.scene import load_scene
-from raysort.workloads import workload
+from raysort.workloads import camera_rays, workload
+
+
+KIND_LABELS = {"diffuse": "first-bounce diffuse rays", "camera": "primary rays",
+               "frame": "pixels (4 spp)"}
 
 
 def _floats(text):
@@ -68,13 +75,13 @@ def measure_builds(scene, budgets, alpha, rounds):
     return rows
 
 
-def measure_speeds(scene, kind, budgets, alpha, traversals, rounds, size):
+def measure_speeds(scene, kind, budgets, alpha, traversals, rounds, size, sorter="nah"):
     """Speed per (budget, traversal), and its ratios over budget 0 per round: ``diffuse``
-    traces the same first-bounce diffuse rays (Mrays/s; every configuration's hits must
-    agree), ``frame`` renders a frame, 4 spp, lambert depth 2 (Mpixels/s; every image
-    must agree)."""
+    (``camera``) traces the same first-bounce diffuse (primary) rays (Mrays/s; every
+    configuration's hits must agree), ``frame`` renders a frame, 4 spp, lambert depth 2
+    (Mpixels/s; every image must agree)."""
     configs = [(b, t) for t in traversals for b in budgets]
-    pipes = [raysort.Pipeline(scene, sorter="nah", traversal=t, threads=1, check_plugins=False,
+    pipes = [raysort.Pipeline(scene, sorter=sorter, traversal=t, threads=1, check_plugins=False,
                               bvh={"spatial_splits": b, "split_alpha": alpha})
              for b, t in configs]
     results = [None] * len(configs)
@@ -84,8 +91,9 @@ def measure_speeds(scene, kind, budgets, alpha, traversals, rounds, size):
         def result(k):
             return pipes[k].render(size, size, spp=4, seed=0).image.tobytes()
     else:
-        work = workload(scene, "diffuse:depth=1", width=size, height=size, spp=1, seed=1,
-                        tile=32)
+        work = camera_rays(scene, width=size, height=size, spp=1, seed=1, tile=32)[0] \
+            if kind == "camera" else \
+            workload(scene, "diffuse:depth=1", width=size, height=size, spp=1, seed=1, tile=32)
         n = len(work.rays)
 
         def result(k):
@@ -120,7 +128,9 @@ def main(argv=None):
                     help="split_alpha (default: the BVH default)")
     ap.add_argument("--traversals", type=_names, default=["wide8", "wide"])
     ap.add_argument("--kinds", type=_names, default=["diffuse"],
-                    help="diffuse (first-bounce rays, Mrays/s), frame (Mpixels/s)")
+                    help="diffuse (first-bounce rays, Mrays/s), camera (primary rays, "
+                         "Mrays/s), frame (Mpixels/s)")
+    ap.add_argument("--sorter", default="nah", help="the pipelines' sorter (nah)")
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--build-rounds", type=int, default=3)
     ap.add_argument("--size", type=int, default=256)
@@ -129,19 +139,20 @@ def main(argv=None):
     args.alpha = BVH.check_parameters(split_alpha=args.alpha)["split_alpha"]
     info = machine_info()
     print(f"CPU: {info['cpu']}; ISA: {isa.active()}; load average {load_average()}; one "
-          f"thread; split_alpha {args.alpha}; {args.rounds} interleaved rounds after a warm-up; "
-          f"thread CPU time; median [min, max]")
+          f"thread; sorter {args.sorter}; split_alpha {args.alpha}; {args.rounds} interleaved "
+          f"rounds after a warm-up; thread CPU time; median [min, max]")
     results = []
     for name in args.scenes:
         scene = load_scene(name)
         builds = measure_builds(scene, args.budgets, args.alpha, args.build_rounds)
         speeds = [row for kind in args.kinds
                   for row in measure_speeds(scene, kind, args.budgets, args.alpha,
-                                            args.traversals, args.rounds, args.size)]
+                                            args.traversals, args.rounds, args.size,
+                                            args.sorter)]
         columns = [(kind, t) for kind in args.kinds for t in args.traversals]
         print(f"\n### {name} ({len(scene.faces)} triangles; " + "; ".join(
             f"{kind}: {next(r['rays'] for r in speeds if r['kind'] == kind)} "
-            f"{'pixels (4 spp)' if kind == 'frame' else 'first-bounce diffuse rays'}"
+            f"{KIND_LABELS[kind]}"
             for kind in args.kinds) + ")\n")
         print("| spatial_splits | build s | references | SAH binary | SAH wide8 |" + "".join(
             f" {t} {kind} {'Mpixels/s' if kind == 'frame' else 'Mrays/s'} | vs "

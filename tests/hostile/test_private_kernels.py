@@ -30,7 +30,7 @@ isa.use(sys.argv[1])
 K = isa.module
 scene = raysort.load_scene("cornell")
 V, F = scene.vertices, scene.faces
-bvh = raysort.BVH(V, F)
+bvh = raysort.BVH(V, F, spatial_splits=0)     # the tree _bvh.build(..., n, ...) makes
 def u8(a):
     return np.ascontiguousarray(a).view(np.uint8).reshape(-1)
 def rays(n):
