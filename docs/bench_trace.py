@@ -40,6 +40,7 @@ import numpy as np
 
 import raysort
 from raysort import isa
+from raysort.bench.command import bvh_params
 from raysort.bench.report import machine_info
 from raysort.workloads import camera_rays, workload
 
@@ -83,10 +84,10 @@ def direct_query(library, bvh, rays):
             np.ascontiguousarray(far, np.float32))
 
 
-def measure(scene_name, kind, configs, rounds, size, clock):
+def measure(scene_name, kind, configs, rounds, size, clock, bvh_params=None):
     scene = raysort.load_scene(scene_name)
     start = time.perf_counter()
-    bvh = scene.bvh()
+    bvh = scene.bvh(**(bvh_params or {}))
     build = {"binary_s": time.perf_counter() - start}
     wide8 = bvh.wide8
     build.update(wide8_s=wide8.build_seconds, wide8_sah=wide8.sah_cost,
@@ -140,6 +141,9 @@ def main(argv=None):
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--clock", choices=sorted(CLOCKS), default="cpu")
+    ap.add_argument("--bvh", type=bvh_params, default={}, metavar="PRESET",
+                    help="the BVH's build parameters, as raysort bench's --bvh (e.g. "
+                         "spatial_splits=0 for the plain tree); default: the BVH's defaults")
     ap.add_argument("--json")
     args = ap.parse_args(argv)
     installed = set(raysort.available("traversals"))
@@ -150,12 +154,13 @@ def main(argv=None):
     info = machine()
     print(f"CPU: {info['cpu']}; raysort ISA: {info['isa']} (compiled: "
           f"{', '.join(info['isa_info']['compiled'])}); one thread; {args.rounds} interleaved "
-          f"rounds; {args.clock} time; Mrays/s median [min, max]")
+          f"rounds; {args.clock} time; BVH {args.bvh or 'defaults'}; Mrays/s median "
+          f"[min, max]")
     results = []
     for scene in args.scenes:
         for kind in args.kinds:
             n, times, build = measure(scene, kind, configs, args.rounds, args.size,
-                                      CLOCKS[args.clock])
+                                      CLOCKS[args.clock], args.bvh)
             print(f"\n### {scene}, {kind} ({n} {'pixels' if kind == 'frame' else 'rays'}); "
                   f"BVH {build['binary_s']:.2f} s, wide8 "
                   f"collapse {build['wide8_s'] * 1e3:.0f} ms, SAH binary "

@@ -134,7 +134,11 @@ cdef inline int nonfinite(const float_bits *x, Py_ssize_t a, Py_ssize_t b) noexc
     infinite or NaN: all exponent bits set."""
     cdef Py_ssize_t i
     cdef int bad = 0
-    cdef float_bits ones = 0x7F800000u if float_bits is uint32_t else 0x7FF0000000000000ull
+    cdef float_bits ones
+    if float_bits is uint32_t:      # (decided when Cython specialises: one branch is C)
+        ones = 0x7F800000u
+    else:
+        ones = 0x7FF0000000000000ull
     for i in range(a, b):
         bad |= (x[i] & ones) == ones
     return bad

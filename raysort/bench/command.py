@@ -45,7 +45,7 @@ def add_parser(sub):
                    help="the paper's settings: 1024x1024, 64 spp (takes long)")
     b.add_argument("--bvh", default=None, metavar="PRESET",
                    help="BVH build preset (default, manta) or parameters "
-                        "'preset=manta,max_leaf=16', 'spatial_splits=0.1'")
+                        "'preset=manta,max_leaf=16', 'spatial_splits=0' (the plain tree)")
     b.add_argument("--sorters", type=_names, default=[],
                    help="installed sorters, comma separated, or 'all'; with --traversals "
                         "or --kernels: the matrix of sorters x traversals")

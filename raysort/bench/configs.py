@@ -209,25 +209,24 @@ def _rule(rule, name, where):
             "baseline": _string(rule, "baseline", where)}
 
 
-def _matrix(data, source):
-    where = f"{source} [matrix]"
-    matrix = _table(data, "matrix", source)
+def _labelled(data, name, source, keys):
+    """Table ``[name]`` of ``data``, its ``label`` template and its string ``keys``
+    checked: ``(table, {key: value}, where)``, ``where`` naming it for errors."""
+    where = f"{source} [{name}]"
+    table = _table(data, name, source)
     out = {}
-    if "label" in matrix:
-        out["label"] = _template(_string(matrix, "label", where), "matrix", where)
-    if "baseline_sorter" in matrix:
-        out["baseline_sorter"] = _string(matrix, "baseline_sorter", where)
-    return out
+    if "label" in table:
+        out["label"] = _template(_string(table, "label", where), name, where)
+    out.update({k: _string(table, k, where) for k in keys if k in table})
+    return table, out, where
+
+
+def _matrix(data, source):
+    return _labelled(data, "matrix", source, ("baseline_sorter",))[1]
 
 
 def _kernels(data, source):
-    where = f"{source} [kernels]"
-    kernels = _table(data, "kernels", source)
-    out = {}
-    if "label" in kernels:
-        out["label"] = _template(_string(kernels, "label", where), "kernels", where)
-    if "baseline" in kernels:
-        out["baseline"] = _string(kernels, "baseline", where)
+    kernels, out, where = _labelled(data, "kernels", source, ("baseline",))
     if "workloads" in kernels:
         kinds = kernels["workloads"]
         if not isinstance(kinds, list) or not kinds:

@@ -4,6 +4,7 @@ command line, pipelines that read one BVH, and the header naming the frame and m
 import argparse
 
 import raysort
+from raysort.bench.command import bvh_params
 from raysort.bench.report import load_average, machine_info
 
 
@@ -14,13 +15,18 @@ def frame_parser(doc, size):
     p.add_argument("scene", nargs="?", default="sibenik")
     p.add_argument("--size", type=int, default=size, help=f"image edge in pixels ({size})")
     p.add_argument("--spp", type=int, default=4, help="samples per pixel (4)")
+    p.add_argument("--bvh", type=bvh_params, default={}, metavar="PRESET",
+                   help="the BVH's build parameters, as raysort bench's --bvh (e.g. "
+                        "spatial_splits=0 for the plain tree); default: the BVH's defaults")
     return p
 
 
-def pipelines(scene, configs):
-    """``{key: Pipeline(scene, **kwargs)}`` for ``configs`` ``{key: kwargs}``, all reading the
-    BVH a tiny render of the first one builds (with the trees its traversal reads)."""
-    pipes = {key: raysort.Pipeline(scene, **kwargs) for key, kwargs in configs.items()}
+def pipelines(scene, configs, bvh=None):
+    """``{key: Pipeline(scene, bvh=bvh, **kwargs)}`` for ``configs`` ``{key: kwargs}``, all
+    reading the BVH a tiny render of the first one builds (with the trees its traversal
+    reads)."""
+    pipes = {key: raysort.Pipeline(scene, bvh=bvh or None, **kwargs)
+             for key, kwargs in configs.items()}
     first = next(iter(pipes.values()))
     first.render(8, 8, spp=1)
     for pipe in pipes.values():

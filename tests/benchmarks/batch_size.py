@@ -41,7 +41,7 @@ def main(argv=None):
 
     configs = [(b, threads) for b in sizes for threads in (1, 2)]
     pipes = pipelines(raysort.load_scene(args.scene),
-                      {c: dict(batch_rays=c[0], threads=c[1]) for c in configs})
+                      {c: dict(batch_rays=c[0], threads=c[1]) for c in configs}, args.bvh)
     print_header(args, pipes[configs[0]])
 
     reference = None

@@ -83,7 +83,8 @@ def main(argv=None):
                              "CPU is summed over both threads)")
     args = parser.parse_args(argv)
 
-    pipes = pipelines(raysort.load_scene(args.scene), {n: dict(threads=n) for n in (1, 2)})
+    pipes = pipelines(raysort.load_scene(args.scene), {n: dict(threads=n) for n in (1, 2)},
+                      args.bvh)
     print_header(args, pipes[1])
 
     threads = args.stage_threads
