@@ -5,10 +5,12 @@ Usage (from any directory, with raysort installed)::
 
     python docs/collapse_params.py sponza                    # camera and diffuse rays
     python docs/collapse_params.py sibenik --kinds primary --rounds 9
+    python docs/collapse_params.py sponza --variants 0.3:32,0.5:32,0.4:24 --bvh spatial_splits=0
 
-One binary BVH per scene is collapsed to 8-wide trees (:meth:`raysort.BVH.collapse8`)
-with several (group cost, largest merged leaf) pairs, the default
-(``BVH.WIDE8_GROUP_COST``, ``BVH.WIDE8_MAX_LEAF``) first.  The default pipeline's
+One binary BVH per scene (the default build, or ``--bvh`` as raysort bench's) is
+collapsed to 8-wide trees (:meth:`raysort.BVH.collapse8`) with several (group cost,
+largest merged leaf) pairs (``--variants``), the default (``BVH.WIDE8_GROUP_COST``,
+``BVH.WIDE8_MAX_LEAF``) first.  The default pipeline's
 ``none`` + ``stream`` traces the same rays (:func:`raysort.workloads.workload`, 256x256
 at 1 spp) through each tree in interleaved rounds (the order rotated per round, one
 untimed warm-up round, each timing the thread CPU of 5 traces).  Per tree: Mrays/s
@@ -23,11 +25,18 @@ import time
 import numpy as np
 
 import raysort
+from raysort.bench.command import bvh_params
 from raysort.bvh import BVH
 from raysort.workloads import workload
 
-VARIANTS = [(BVH.WIDE8_GROUP_COST, BVH.WIDE8_MAX_LEAF), (0.8, 32), (0.6, 16), (0.4, 16),
-            (0.4, 8), (1.0, 8), (0.2, 32)]
+DEFAULT = (BVH.WIDE8_GROUP_COST, BVH.WIDE8_MAX_LEAF)
+VARIANTS = [(0.8, 32), (0.6, 16), (0.4, 16), (0.4, 8), (1.0, 8), (0.2, 32)]
+
+
+def variants(text):
+    """``"0.3:32,0.5:16"`` -> [(0.3, 32), (0.5, 16)]."""
+    pairs = [item.split(":") for item in text.split(",") if item]
+    return [(float(g), int(leaf)) for g, leaf in pairs]
 
 
 def timed(pipe, work, calls=5):
@@ -44,18 +53,23 @@ def main():
     ap.add_argument("scene")
     ap.add_argument("--kinds", default="primary,diffuse")
     ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--variants", type=variants, default=VARIANTS, metavar="G:LEAF,...",
+                    help="the (group cost, largest leaf) pairs to compare with the default")
+    ap.add_argument("--bvh", type=bvh_params, default={}, metavar="PRESET",
+                    help="the binary tree's build parameters, as raysort bench's --bvh")
     args = ap.parse_args()
     scene = raysort.load_scene(args.scene)
-    bvh = scene.bvh()
-    trees = {v: bvh.collapse8(group_cost=v[0], max_leaf=v[1]) for v in VARIANTS}
+    bvh = scene.bvh(**args.bvh)
+    shapes = [DEFAULT] + [v for v in args.variants if v != DEFAULT]
+    trees = {v: bvh.collapse8(group_cost=v[0], max_leaf=v[1]) for v in shapes}
     pipe = raysort.Pipeline(scene, sorter="none", traversal="stream")
     pipe._bvh = bvh                         # one binary tree; its wide8 is swapped below
     print(f"CPU ISA {raysort.isa.info()['active']}; {args.rounds} interleaved rounds")
     for kind in args.kinds.split(","):
         work = workload(scene, kind, width=256, height=256)
-        seconds, counters, ref = {v: [] for v in VARIANTS}, {}, None
+        seconds, counters, ref = {v: [] for v in shapes}, {}, None
         for r in range(args.rounds + 1):
-            for v in VARIANTS[r % len(VARIANTS):] + VARIANTS[:r % len(VARIANTS)]:
+            for v in shapes[r % len(shapes):] + shapes[:r % len(shapes)]:
                 bvh._wide8 = trees[v]
                 dt, hits, counters[v] = timed(pipe, work)
                 if ref is None:
@@ -69,8 +83,8 @@ def main():
         print(f"\n{args.scene} {kind} ({n} rays)\n")
         print("| group cost | largest leaf | Mrays/s | speed vs default [min, max] | SAH "
               "| ia | box4 | tri4 |\n| ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: |")
-        for v in VARIANTS:
-            ratios = [b / t for b, t in zip(seconds[VARIANTS[0]], seconds[v])]
+        for v in shapes:
+            ratios = [b / t for b, t in zip(seconds[shapes[0]], seconds[v])]
             c = counters[v]
             print(f"| {v[0]:.1f} | {v[1]} | {n / statistics.median(seconds[v]) / 1e6:.2f} | "
                   f"{statistics.median(ratios):.3f} [{min(ratios):.3f}, {max(ratios):.3f}] | "
