@@ -15,7 +15,8 @@ CPU time, median [min, max]) and its SAH cost (binary, ``BVH.stats``; wide8,
 first-bounce diffuse rays of a ``--size`` square render at 1 spp
 (:func:`raysort.workloads.workload`) through ``Pipeline.trace``, ``camera`` its primary
 rays (:func:`raysort.workloads.camera_rays`, 32x32 tiles), and ``frame`` renders a
-``--size`` square frame at 4 spp (lambert, depth 2) with ``Pipeline.render``; each in
+``--size`` square frame at ``--spp`` (4) spp (lambert, depth 2) with ``Pipeline.render``
+(with the framework's share of its CPU, every stage but ``traverse``); each in
 interleaved rounds shuffled per round after an untimed warm-up round
 (:func:`raysort.bench.rounds.run_rounds`), timed by the thread's CPU clock. Reported:
 Mrays/s (Mpixels/s) median [min, max] and the median [min, max] of the per-round speed
@@ -39,7 +40,7 @@ from raysort.workloads import camera_rays, workload
 
 
 KIND_LABELS = {"diffuse": "first-bounce diffuse rays", "camera": "primary rays",
-               "frame": "pixels (4 spp)"}
+               "frame": "pixels"}
 
 
 def _floats(text):
@@ -75,21 +76,26 @@ def measure_builds(scene, budgets, alpha, rounds):
     return rows
 
 
-def measure_speeds(scene, kind, budgets, alpha, traversals, rounds, size, sorter="nah"):
+def measure_speeds(scene, kind, budgets, alpha, traversals, rounds, size, sorter="nah", spp=4):
     """Speed per (budget, traversal), and its ratios over budget 0 per round: ``diffuse``
     (``camera``) traces the same first-bounce diffuse (primary) rays (Mrays/s; every
-    configuration's hits must agree), ``frame`` renders a frame, 4 spp, lambert depth 2
-    (Mpixels/s; every image must agree)."""
+    configuration's hits must agree), ``frame`` renders a frame, ``spp`` spp, lambert depth
+    2 (Mpixels/s, and the framework's share of the frame's CPU: every stage but
+    ``traverse``; every image must agree)."""
     configs = [(b, t) for t in traversals for b in budgets]
     pipes = [raysort.Pipeline(scene, sorter=sorter, traversal=t, threads=1, check_plugins=False,
                               bvh={"spatial_splits": b, "split_alpha": alpha})
              for b, t in configs]
     results = [None] * len(configs)
+    shares = [[] for _ in configs]
     if kind == "frame":
         n = size * size
 
         def result(k):
-            return pipes[k].render(size, size, spp=4, seed=0).image.tobytes()
+            frame = pipes[k].render(size, size, spp=spp, seed=0)
+            cpu = frame.stats.stage_seconds
+            shares[k].append(1 - cpu["traverse"] / sum(cpu.values()))
+            return frame.image.tobytes()
     else:
         work = camera_rays(scene, width=size, height=size, spp=1, seed=1, tile=32)[0] \
             if kind == "camera" else \
@@ -117,6 +123,8 @@ def measure_speeds(scene, kind, budgets, alpha, traversals, rounds, size, sorter
         rows.append({"kind": kind, "budget": b, "traversal": t, "rays": n,
                      "mrays_s": summary(speeds),
                      "vs_first_budget": summary(ratios(seconds, k, base))})
+        if kind == "frame":
+            rows[-1]["framework_share"] = summary(shares[k][-rounds:])
     return rows
 
 
@@ -131,6 +139,7 @@ def main(argv=None):
                     help="diffuse (first-bounce rays, Mrays/s), camera (primary rays, "
                          "Mrays/s), frame (Mpixels/s)")
     ap.add_argument("--sorter", default="nah", help="the pipelines' sorter (nah)")
+    ap.add_argument("--spp", type=int, default=4, help="samples per pixel of frames (4)")
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--build-rounds", type=int, default=3)
     ap.add_argument("--size", type=int, default=256)
@@ -148,7 +157,7 @@ def main(argv=None):
         speeds = [row for kind in args.kinds
                   for row in measure_speeds(scene, kind, args.budgets, args.alpha,
                                             args.traversals, args.rounds, args.size,
-                                            args.sorter)]
+                                            args.sorter, args.spp)]
         columns = [(kind, t) for kind in args.kinds for t in args.traversals]
         print(f"\n### {name} ({len(scene.faces)} triangles; " + "; ".join(
             f"{kind}: {next(r['rays'] for r in speeds if r['kind'] == kind)} "
@@ -171,6 +180,12 @@ def main(argv=None):
                 cells += [f"{m['median']:.3f} [{m['min']:.3f}, {m['max']:.3f}]",
                           f"{v['median']:.3f}x [{v['min']:.3f}, {v['max']:.3f}]"]
             print("| " + " | ".join(cells) + " |")
+        for row in speeds:
+            if "framework_share" in row:
+                f = row["framework_share"]
+                print(f"framework share of a frame (all but traverse), {row['traversal']}, "
+                      f"spatial_splits {row['budget']:g}: {f['median']:.1%} [{f['min']:.1%}, "
+                      f"{f['max']:.1%}]")
         sys.stdout.flush()
         results.append({"scene": name, "builds": builds, "speeds": speeds})
     if args.json:
