@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from raysort import registry
-from raysort.bench.report import group_report, load_average, machine_info
+from raysort.bench.report import bvh_settings, group_report, load_average, machine_info
 from raysort.bench.rounds import run_checked
 from raysort.errors import ConfigError, RaysortError
 from raysort.pipeline import Pipeline
@@ -81,7 +81,7 @@ def run_frames(scene_specs, configs, table, *, width=256, height=256, spp=4, dep
               "settings": {"width": width, "height": height, "spp": spp, "depth": depth,
                            "seed": seed, "threads": threads, "repeat": repeat,
                            "order_seed": order_seed, "warmup": warmup, "shader": shader,
-                           "bvh": dict(bvh or {})},
+                           **bvh_settings(bvh)},
               "groups": {}}
     scenes = [load_scene(spec) for spec in scene_specs]     # every mesh read before timing
     for s, scene in enumerate(scenes):

@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from raysort import registry
-from raysort.bench.report import group_report, load_average, machine_info
+from raysort.bench.report import bvh_settings, group_report, load_average, machine_info
 from raysort.bench.rounds import run_checked
 from raysort.rays import gather, scatter, scatter_occluded
 from raysort.scene import load_scene
@@ -74,7 +74,7 @@ def run_kernels(scene_specs, configs, kinds, *, width=256, height=256, spp=1, se
               "settings": {"width": width, "height": height, "spp": spp, "depth": None,
                            "seed": seed, "threads": 1, "repeat": repeat,
                            "order_seed": order_seed, "warmup": warmup,
-                           "workloads": list(kinds), "bvh": dict(bvh or {})},
+                           "workloads": list(kinds), **bvh_settings(bvh)},
               "groups": {}}
     scenes = [load_scene(spec) for spec in scene_specs]     # every mesh read before timing
     jobs = [(scene, kind) for scene in scenes for kind in kinds]

@@ -17,12 +17,13 @@ import sys
 import numpy as np
 
 from raysort.bench.rounds import ratios, summary
+from raysort.bvh import BVH
 from raysort.errors import ConfigError
 from raysort.output import shown
 from raysort.stats import COUNTER_LABELS
 
-__all__ = ["SCHEMA", "chart_format", "draw_chart", "failures", "format_report", "group_report",
-           "load_average", "machine_info", "write_chart"]
+__all__ = ["SCHEMA", "bvh_settings", "chart_format", "draw_chart", "failures", "format_report",
+           "group_report", "load_average", "machine_info", "write_chart"]
 
 #: the JSON layout's name and version, written into every report
 SCHEMA = "raysort-bench/2"
@@ -137,6 +138,12 @@ def check_label(r, differs="DIFFERS", inexact=", max diff {:.2g}"):
     return "inexact" + (inexact.format(diff) if diff is not None else "")
 
 
+def bvh_settings(bvh):
+    """A report's settings for the BVH: the ``--bvh`` given (``bvh``) and the build
+    parameters it resolves to (the defaults included, which change between versions)."""
+    return {"bvh": dict(bvh or {}), "bvh_params": BVH.check_parameters(**(bvh or {}))}
+
+
 def format_report(report, stream=None):
     """Print the report's tables."""
     stream = sys.stdout if stream is None else stream
@@ -148,7 +155,10 @@ def format_report(report, stream=None):
     what = (f"{s['width']}x{s['height']}, {s['spp']} spp, depth {s['depth']}, seed {s['seed']}"
             if report["kind"] == "frame" else
             f"traversal only, rays of a {s['width']}x{s['height']}, {s['spp']} spp render")
-    say(f"raysort bench: {what}, {s['threads']} thread(s), BVH {s['bvh'] or 'default'}; "
+    built = s.get("bvh_params")         # (absent from reports of older versions)
+    tree = f"BVH {s['bvh'] or 'default'}" + (
+        f" ({', '.join(f'{k} {v:g}' for k, v in built.items())})" if built else "")
+    say(f"raysort bench: {what}, {s['threads']} thread(s), {tree}; "
         f"{s['repeat']} timed rounds{' after a warm-up round' if s['warmup'] else ''}, "
         f"order shuffled per round (seed {s['order_seed']}); median [min-max]")
     load = report["load"]

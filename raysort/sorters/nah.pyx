@@ -264,15 +264,16 @@ class NahSorter(Sorter):
                 None if self.large_packet is None else
                 integer("large_packet", self.large_packet, 1, MAX_PACKET))
 
-    def _packets(self, packets, n):
-        """The large packets of ``n`` rays, checked, cut to ``large_packet``."""
+    def _packets(self, packets, n, params=None):
+        """The large packets of ``n`` rays, checked, cut to ``large_packet`` (of
+        ``params``, the checked parameters, when the caller has them)."""
         packets = check_packets(packets, n)
-        large_packet = self._params()[3]
+        large_packet = (params or self._params())[3]
         return packets if large_packet is None else fixed_packets(packets, large_packet)
 
     def _run(self, rays, packets, bounds, bucket=None, cell=None):
-        threshold, max_cells, packet_size, _ = self._params()
-        packets = self._packets(packets, len(rays))
+        params = threshold, max_cells, packet_size, _ = self._params()
+        packets = self._packets(packets, len(rays), params)
         bounds = np.asarray(bounds, dtype=np.float32)
         extent = np.ascontiguousarray(bounds[1] - bounds[0], dtype=np.float32)
         n = len(rays)

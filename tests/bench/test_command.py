@@ -4,6 +4,7 @@ import json
 import pytest
 
 import raysort
+from raysort.bvh import PRESETS
 from raysort.bench.report import SCHEMA
 from raysort.cli import main
 from raysort.sdk import Counters, Traversal
@@ -117,12 +118,15 @@ def test_list_prints_the_configurations_without_running(tmp_path, monkeypatch, c
     assert all(line.startswith("single + ") for line in lines)
 
 
-def test_manta_bvh_preset_gives_the_same_images(tmp_path, monkeypatch):
-    status, rep = bench(tmp_path, monkeypatch, "cornell", "--bvh", "manta",
+def test_manta_bvh_preset_gives_the_same_images(tmp_path, monkeypatch, capsys):
+    status, rep = bench(tmp_path, monkeypatch, "cornell", "--bvh", "preset=manta,max_leaf=64",
                         "--only", "ranged (8x8),ranged + nah,partition (32x32)")
     assert status == 0
     g = rep["groups"]["cornell"]
-    assert rep["settings"]["bvh"] == {"preset": "manta"}
+    assert rep["settings"]["bvh"] == {"preset": "manta", "max_leaf": 64}
+    # the parameters the tree was built with: the preset's, the one given on top
+    assert rep["settings"]["bvh_params"] == {**PRESETS["manta"], "max_leaf": 64}
+    assert "max_leaf 64, bins 16, traversal_cost 64, spatial_splits 0" in capsys.readouterr().out
     assert all(r["identical_image"] for r in g["configs"])
 
 

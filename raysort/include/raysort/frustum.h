@@ -385,11 +385,11 @@ RS_INLINE void rs_frustum_walk(const rs_node8 *nodes, const rs_tri8 *groups, rs_
                 rs_frustum_entry child = {n->child[k], n->count[k], top.ref, k, entry[k]};
                 rs_frustum_insert(hit, m++, child);
             }
-            for (int k = m - 1; k >= 0; --k) {  /* the nearest is popped first */
+            /* The nearest is popped first.  No prefetch of the children: a coherent
+             * chunk's nodes are those its neighbours just walked, in cache, and the
+             * prefetches cost camera rays 2-3 % (BENCHMARKS.md §9). */
+            for (int k = m - 1; k >= 0; --k)
                 stack[sp++] = hit[k];
-                rs_prefetch(hit[k].ref >= 0 ? (const void *)&nodes[hit[k].ref]
-                            : (const void *)&groups[-hit[k].ref - 1]);
-            }
             continue;
         }
         uint64_t rays = rs_frustum_leaf_rays(r, s, e, &nodes[top.parent], top.slot, c);
