@@ -3,7 +3,7 @@
     python tests/benchmarks/spatial_splits.py [scene ...] [--budgets 0,0.1,0.3,1]
                                               [--alpha A] [--traversals wide8,wide]
                                               [--kinds diffuse,camera,frame]
-                                              [--sorter nah] [--rounds 7]
+                                              [--sorter nah] [--spp 4] [--rounds 7]
                                               [--size 256] [--json out.json]
 
 For each scene (default: sibenik, sponza, forest) and each ``spatial_splits`` reference
