@@ -30,7 +30,10 @@ class NahNumpySorter(NahSorter):
     trusted = False
 
     def classify(self, rays, packets, bounds):
-        packets = self._packets(packets, len(rays))
+        return self._classes(rays, self._packets(packets, len(rays)), bounds)
+
+    def _classes(self, rays, packets, bounds):
+        """:meth:`classify` of large packets already checked and cut (``_packets``)."""
         f32 = np.float32
         o, d = rays.origins, rays.directions
         n = len(rays)
@@ -76,7 +79,7 @@ class NahNumpySorter(NahSorter):
 
     def sort(self, rays, packets, bounds):
         packets = self._packets(packets, len(rays))
-        bucket, cell = self.classify(rays, packets, bounds)
+        bucket, cell = self._classes(rays, packets, bounds)
         packet = np.repeat(np.arange(len(packets) - 1), np.diff(packets))
         key = packet * 192 + bucket.astype(np.int64) * 8 + cell
         order = np.argsort(key, kind="stable").astype(np.int32)
