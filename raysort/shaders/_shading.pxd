@@ -271,10 +271,17 @@ cdef inline void cosine_directions(HitBlock *b) noexcept nogil:
 
 
 cdef inline void keep_lanes(const void *src, int n, uint64_t keep, void *dst,
-                            int count) noexcept nogil:
+                            int count, Py_ssize_t room) noexcept nogil:
     """Copy the ``count`` 4-byte values of ``src[0, n)`` whose bit is set in ``keep``, in
-    order, to ``dst`` (a compress a vector at a time, through a block-sized stage)."""
+    order, to ``dst``, which can take ``room`` values: a compress a vector at a time,
+    straight into ``dst`` where it has ``n + RS_SW`` values of room (the values past
+    ``count`` are scratch, which the next block's rays or the batch's truncation
+    overwrite), else through a block-sized stage (a copy of variable size, a call into
+    the C library: the last blocks of a batch)."""
     cdef int32_t stage[2 * LANES]
+    if room >= n + RS_SW:
+        rs_keep32(<const int32_t *> src, n, keep, <int32_t *> dst)
+        return
     rs_keep32(<const int32_t *> src, n, keep, stage)
     memcpy(dst, stage, count * sizeof(int32_t))
 
@@ -295,10 +302,11 @@ cdef inline void write_ray(const HitBlock *b, int h, float w0, float w1, float w
 
 
 cdef inline void write_rays(const HitBlock *b, uint64_t keep, int count,
-                            float[:, ::1] out, int k, int step) noexcept nogil:
+                            float[:, ::1] out, int k, int step, Py_ssize_t room) noexcept nogil:
     """Write the new rays (``o``, ``w``, 0, ``tmax``) of the ``count`` lanes set in
     ``keep`` as rays ``k, k + step, k + 2 step, ...`` of a batch's rows (``step`` 1
-    unless every lane makes a ray)."""
+    unless every lane makes a ray; otherwise each row can take ``room`` values from
+    ray ``k`` on, as :func:`keep_lanes` says)."""
     cdef int a, j
     cdef float *row
     if count == b.n:       # every lane
@@ -314,9 +322,9 @@ cdef inline void write_rays(const HitBlock *b, uint64_t keep, int count,
             row[j * step] = b.tmax[j]
     else:
         for a in range(3):
-            keep_lanes(b.o[a], b.n, keep, &out[RS_RAY_OX + a, k], count)
-            keep_lanes(b.w[a], b.n, keep, &out[RS_RAY_DX + a, k], count)
-        keep_lanes(b.tmax, b.n, keep, &out[RS_RAY_TMAX, k], count)
+            keep_lanes(b.o[a], b.n, keep, &out[RS_RAY_OX + a, k], count, room)
+            keep_lanes(b.w[a], b.n, keep, &out[RS_RAY_DX + a, k], count, room)
+        keep_lanes(b.tmax, b.n, keep, &out[RS_RAY_TMAX, k], count, room)
     row = &out[RS_RAY_TMIN, k]
     for j in range(count):
         row[j * step] = 0.0

@@ -68,7 +68,7 @@ cdef int ao_batch(const float[:, ::1] rays, const float[::1] t, const int32_t[::
                 b.u1[h] = uniform_at(key[h], RS_DIM_AO + 2 * k)
                 b.u2[h] = uniform_at(key[h], RS_DIM_AO + 2 * k + 1)
             cosine_directions(&b)
-            write_rays(&b, 0, b.n, ao_rays, m + k, samples)   # every lane
+            write_rays(&b, 0, b.n, ao_rays, m + k, samples, 0)   # every lane
         for h in range(b.n):
             i = b.ray[h]
             for k in range(samples):

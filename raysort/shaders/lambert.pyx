@@ -160,6 +160,7 @@ cdef int light_lanes(HitBlock *b, float reflect[3][LANES], const int32_t *hit_sl
     cdef float *row
     cdef uint64_t keep
     cdef int h, j, c, count = 0
+    cdef Py_ssize_t room = sh_parent.shape[0] - m     # values each output row can take
     for h in range(b.n):
         ok[h] = toward_light(b, h, lx, ly, lz, &b.w[0][h], &b.w[1][h], &b.w[2][h],
                              &b.tmax[h], &weight[h])
@@ -168,7 +169,7 @@ cdef int light_lanes(HitBlock *b, float reflect[3][LANES], const int32_t *hit_sl
         count += ok[h]
     if count == 0:
         return m
-    write_rays(b, keep, count, sh_rays, m, 1)
+    write_rays(b, keep, count, sh_rays, m, 1, room)
     if count == b.n:        # every lane: copies
         for c in range(3):
             intensity = light_int[0, c]
@@ -182,9 +183,9 @@ cdef int light_lanes(HitBlock *b, float reflect[3][LANES], const int32_t *hit_sl
             intensity = light_int[0, c]
             for j in range(b.n):
                 lit[j] = reflect[c][j] * intensity * weight[j]
-            keep_lanes(lit, b.n, keep, &sh_contrib[c, m], count)
-        keep_lanes(b.ray, b.n, keep, &sh_parent[m], count)
-        keep_lanes(hit_slot, b.n, keep, &sh_slot[m], count)
+            keep_lanes(lit, b.n, keep, &sh_contrib[c, m], count, room)
+        keep_lanes(b.ray, b.n, keep, &sh_parent[m], count, room)
+        keep_lanes(hit_slot, b.n, keep, &sh_slot[m], count, room)
     return m + count
 
 
@@ -368,15 +369,15 @@ cdef void shade_batch(const float[:, ::1] rays, const float[::1] t, const int32_
                 count += 1
         if count == 0:
             continue
-        write_rays(&b, keep, count, next_rays, k, 1)
+        write_rays(&b, keep, count, next_rays, k, 1, next_parent.shape[0] - k)
         if count == b.n:            # every lane: copies
             for c in range(3):
                 copy_lanes(&next_thr[c, k], reflect[c], count)
             copy_lanes(&next_parent[k], b.ray, count)
         else:
             for c in range(3):
-                keep_lanes(reflect[c], b.n, keep, &next_thr[c, k], count)
-            keep_lanes(b.ray, b.n, keep, &next_parent[k], count)
+                keep_lanes(reflect[c], b.n, keep, &next_thr[c, k], count, next_parent.shape[0] - k)
+            keep_lanes(b.ray, b.n, keep, &next_parent[k], count, next_parent.shape[0] - k)
         k += count
     bad |= new_paths_bad(next_parent, next_thr, NULL, k_done, k, n, slots) \
         | new_paths_bad(sh_parent, sh_contrib, &sh_slot[0] if m else NULL, m_done, m, n, slots)

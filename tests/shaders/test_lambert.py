@@ -14,7 +14,7 @@ import raysort
 from raysort.camera import Camera
 from raysort.errors import PluginContractError
 from raysort.procedural import PLANE_CAMERA, plane_under_sky
-from raysort.rays import MAX_PACKET
+from raysort.rays import MAX_PACKET, RayRow
 from raysort.scene import PointLight, Scene
 from raysort.reference import brute_force
 from raysort.shaders import lambert
@@ -161,6 +161,15 @@ def test_the_next_throughput_is_contiguous():
     assert bounce.throughput.flags.c_contiguous
 
 
+def assert_padded(batch):
+    """Every lane of ``batch``'s rows past its rays is inactive padding, as a new batch's."""
+    pad = batch.data[:, len(batch):]
+    expected = np.zeros_like(pad)
+    expected[int(RayRow.tmin)] = np.inf
+    expected[int(RayRow.tmax)] = -np.inf
+    np.testing.assert_array_equal(pad, expected)
+
+
 @pytest.mark.parametrize("name, more_lights", [("cornell", 0), ("cornell", 2), ("forest", 0)])
 def test_shade_continues_every_hit_as_numpy_computes_it(each_isa, name, more_lights):
     """One ``shade`` call on every ISA, held against NumPy statements of the same
@@ -203,6 +212,7 @@ def test_shade_continues_every_hit_as_numpy_computes_it(each_isa, name, more_lig
     eps = (np.float32(1) + np.abs(p).max(axis=0)) * np.float32(1 / 8192)
     start = p + eps * nrm
     out = bounce.rays
+    assert_padded(out)
     np.testing.assert_array_equal(out.origins, start)
     np.testing.assert_array_equal(out.tmin, 0)
     np.testing.assert_array_equal(out.tmax, np.inf)
@@ -228,6 +238,7 @@ def test_shade_continues_every_hit_as_numpy_computes_it(each_isa, name, more_lig
         intensity = np.asarray([light.intensity for light in scene.lights], np.float32).T
         contribution = (thr[:, hit] * albedo)[:, :, None] * intensity[:, None, :] * weight
         shadow = bounce.shadow
+        assert_padded(shadow.rays)      # the lanes past its rays: no scratch left in them
         each = np.broadcast_to(hit[:, None], lit.shape)
         np.testing.assert_array_equal(shadow.parent, each[lit])
         np.testing.assert_array_equal(shadow.slot, each[lit])      # slot i is path i's
