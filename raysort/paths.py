@@ -5,7 +5,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from raysort.rays import RayBatch
+from raysort._gather import sample_paths
+from raysort.rays import RayBatch, _carve
 
 __all__ = ["Paths", "Bounce", "ShadowRays"]
 
@@ -27,6 +28,21 @@ class Paths:
         if throughput is None:
             throughput = np.ones((3, len(self.pixel)), dtype=np.float32)
         self.throughput = np.ascontiguousarray(throughput, dtype=np.float32)
+
+    @classmethod
+    def _of_samples(cls, pixels, slots, samples):
+        """The paths of a batch that holds, sample by sample, a pass over ``pixels`` (int32,
+        each with its accumulator row in ``slots``) for each of ``samples`` (int32), with
+        throughput 1: written in one pass into one recycled block, whose pages are
+        not faulted in again batch after batch (a generator's batch, in the pipeline)."""
+        n = len(pixels) * len(samples)
+        pixel, sample, slot, throughput = _carve(4 * n, 4 * n, 4 * n, 12 * n)
+        paths = object.__new__(cls)
+        paths.pixel, paths.sample, paths.slot = (a.view(np.int32) for a in (pixel, sample, slot))
+        paths.throughput = throughput.view(np.float32).reshape(3, n)
+        sample_paths(pixels, slots, samples, paths.pixel, paths.sample, paths.slot,
+                     paths.throughput)
+        return paths
 
     def __len__(self):
         return len(self.pixel)

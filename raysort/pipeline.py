@@ -36,7 +36,6 @@ import numpy as np
 
 from raysort import contract, isa, registry
 from raysort._gather import follow_paths as _follow_paths
-from raysort._gather import sample_paths as _sample_paths
 from raysort.bvh import BVH
 from raysort.errors import ConfigError
 from raysort.orders import is_identity_order
@@ -621,7 +620,7 @@ class Pipeline:
                 contract.check_generated(self.generator, rays, n_pix * len(samples),
                                          with_rays=False)     # the gather checks them
                 clock.lap("check")
-            paths = Paths(*_sample_paths(pixels, slots, samples))
+            paths = Paths._of_samples(pixels, slots, samples)
             packets = np.append((np.arange(0, len(rays), n_pix, dtype=np.int32)[:, None]
                                  + starts).ravel(), np.int32(len(rays)))
             depth, maker = 0, ("generators", self.generator, "generate() result")

@@ -256,13 +256,40 @@ def test_sample_paths_is_tile_and_repeat(n, k):
     rng = np.random.default_rng(n + k)
     pixels, slots = (rng.integers(-5, 1 << 30, n).astype(np.int32) for _ in range(2))
     samples = rng.integers(0, 100, k).astype(np.int32)
-    pixel, sample, slot = sample_paths(pixels, slots, samples)
-    assert pixel.dtype == sample.dtype == slot.dtype == np.int32
+    pixel, sample, slot = (np.full(n * k, 7, np.int32) for _ in range(3))
+    throughput = np.full((3, n * k), 7, np.float32)
+    sample_paths(pixels, slots, samples, pixel, sample, slot, throughput)
     assert np.array_equal(pixel, np.tile(pixels, k))
     assert np.array_equal(sample, np.repeat(samples, n))
     assert np.array_equal(slot, np.tile(slots, k))
+    assert np.array_equal(throughput, np.ones((3, n * k)))
     with pytest.raises(ValueError, match="one slot per pixel"):
-        sample_paths(pixels, slots[:-1] if n else np.zeros(1, np.int32), samples)
+        sample_paths(pixels, slots[:-1] if n else np.zeros(1, np.int32), samples, pixel,
+                     sample, slot, throughput)
+    with pytest.raises(ValueError, match="expected"):
+        sample_paths(pixels, slots, samples, pixel, sample, slot, throughput[:2])
+    with pytest.raises(ValueError, match="expected"):
+        sample_paths(pixels, slots, samples, pixel[:-1] if n * k else np.zeros(1, np.int32),
+                     sample, slot, throughput)
+
+
+def test_paths_of_samples_are_the_paths_of_their_arrays():
+    """``Paths._of_samples`` (the pipeline's paths of a generated batch, in a recycled
+    block): the paths ``Paths`` makes of np.tile and np.repeat, throughput 1, in arrays
+    that share no memory."""
+    from raysort.paths import Paths
+
+    pixels = np.arange(10, 30, dtype=np.int32)
+    slots = np.arange(20, dtype=np.int32)[::-1].copy()
+    samples = np.array([3, 4, 5], np.int32)
+    made = Paths._of_samples(pixels, slots, samples)
+    want = Paths(np.tile(pixels, 3), np.repeat(samples, 20), np.tile(slots, 3))
+    for name in Paths.__slots__:
+        got = getattr(made, name)
+        assert got.dtype == getattr(want, name).dtype and got.flags.c_contiguous
+        assert np.array_equal(got, getattr(want, name))
+    arrays = [getattr(made, name) for name in Paths.__slots__]
+    assert not any(np.shares_memory(a, b) for i, a in enumerate(arrays) for b in arrays[:i])
 
 
 def test_follow_paths_is_fancy_indexing_and_refuses_a_parent_out_of_range():
