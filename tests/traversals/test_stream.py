@@ -16,7 +16,7 @@ from raysort.rays import (Hits, PacketRow, RayBatch, RayRow, gather, scatter,
                           scatter_occluded)
 from raysort.reference import brute_force
 from raysort.stats import Counters
-from raysort.workloads import camera_rays
+from raysort.workloads import camera_rays, workload
 
 from _helpers import assert_same_hits, random_rays
 
@@ -366,6 +366,32 @@ def test_coherent_chunks_take_the_frustum_walk(each_isa, sibenik, frustum):
         assert c.ia > 0 and c.stream_rays < len(rays) // 2
     else:
         assert c.ia == 0 and c.stream_rays >= len(rays)
+
+
+@pytest.mark.parametrize("kind", ["shadow", "camera with gaps"])
+def test_dense_blocks_of_a_chunk_keep_brute_forces_hits(each_isa, sibenik, kind):
+    """Coherent chunks in the frustum walk test the leaves that most of a block's rays
+    enter a triangle at a time for the block (``rs_frustum_leaf_block``): shadow rays to
+    the lamp (any hit and closest hit), and camera rays of which every third is invalid
+    (tmin > tmax), so that blocks hold lanes that do not look, whose hits must stay
+    misses.  Every ray keeps brute force's hit, and the chunks take the walk."""
+    if kind == "shadow":
+        work = workload(sibenik, "shadow", width=64, height=64, seed=3)
+        rays = work.rays
+    else:
+        rays = camera_rays(sibenik, 64, 64)[0].rays
+        rays.tmin[::3] = 2.0
+        rays.tmax[::3] = 1.0
+    ref = brute_force(sibenik.vertices, sibenik.faces, rays)
+    order, offsets = raysort.create("sorters", "none").sort(
+        rays, np.array([0, len(rays)], np.int32), sibenik.bvh().bounds)
+    hits, c = trace(sibenik.bvh(), rays, order, offsets, frustum=True)
+    assert_same_hits(hits, ref, f"{each_isa} sibenik {kind}")
+    assert c.ia > 0
+    occluded, _ = trace(sibenik.bvh(), rays, order, offsets, any_hit=True, frustum=True)
+    np.testing.assert_array_equal(occluded, ref.prim >= 0)
+    if kind != "shadow":
+        assert (ref.prim[::3] == -1).all() and (ref.prim >= 0).mean() > 0.5
 
 
 def test_lanes_follow_the_isa(each_isa):

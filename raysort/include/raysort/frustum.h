@@ -6,8 +6,11 @@
  * Wald et al. 2007's frustum, as rs_ia_miss) checks all eight child boxes at
  * once, and the children it keeps are visited nearest first by their lower
  * bound of entry.  At a leaf the chunk's rays meet the leaf's box one SIMD
- * group at a time (rs_box1's operations per lane), and each ray that enters it
- * meets the leaf's triangle groups as in `wide8` (rs_tri8_hit).  A box waiting
+ * group at a time (rs_box1's operations per lane).  A group of RS_SW lanes of
+ * which at least half enter it meets the leaf's triangles one at a time, a
+ * ray per lane (rs_frustum_leaf_block); each other ray that enters it meets the
+ * leaf's triangle groups as in `wide8` (rs_tri8_hit; two rays at a time on
+ * AVX-512).  A box waiting
  * on the stack is dropped once every ray of the chunk has a hit closer than
  * where the chunk can first enter it.  A chunk that is not coherent (fewer
  * than RS_FRUSTUM_MIN_RAYS active rays, directions that do not keep their sign
@@ -19,9 +22,9 @@
  * corners bound every ray's value; axes with a sign change, zero or infinite
  * reciprocals do not cull), and a box is dropped from the stack only when its
  * lower bound exceeds every ray's t * RS_BOX_SLACK.  Every ray that could hold
- * a hit in a leaf is tested against all of its triangles with rs_tri8_hit,
- * which keeps the lowest (t, id) whatever the order: brute force's hit, bit for
- * bit, on every ISA.
+ * a hit in a leaf is tested against all of its triangles, with rs_tri8_hit or
+ * rs_stream_tri, both of which keep the lowest (t, id) whatever the order:
+ * brute force's hit, bit for bit, on every ISA.
  */
 #ifndef RAYSORT_FRUSTUM_H
 #define RAYSORT_FRUSTUM_H
@@ -41,6 +44,13 @@
  * share too little of it (nah-sorted second-bounce rays, in sub-packets of a
  * handful of rays, ran 1.2-2x slower through the walk than one at a time). */
 #define RS_FRUSTUM_MIN_RAYS 16
+
+/* The fewest of a block's RS_SW lanes entering a leaf (in sixteenths of the
+ * block) that take rs_frustum_leaf_block, a triangle at a time for the block,
+ * rather than a ray (or, on AVX-512, two) at a time. */
+#ifndef RS_FRUSTUM_DENSE
+#define RS_FRUSTUM_DENSE 8
+#endif
 
 /* A box the chunk waits to visit: child `slot` of node8 `parent`. */
 typedef struct rs_frustum_entry {
@@ -264,6 +274,48 @@ RS_INLINE int rs_frustum_leaf_one(rs_rays *r, int i, const rs_tri8 *g, int tris,
     return changed;
 }
 
+/* The rays of lanes [i, i + RS_SW) set in `bits` (chunk lanes that enter a
+ * leaf; the whole block readable) against the leaf's `tris` groups at g, a
+ * triangle at a time for the block (rs_stream_tri: rs_tri1's operations and
+ * acceptance rule in each lane, so each ray keeps the hit rs_frustum_leaf_one
+ * finds, and is counted as it counts: a group per ray while the ray still
+ * looks).  Where most of a block's rays enter a leaf, one test serves them all
+ * and no lane's hit is picked by a scalar loop.  Returns whether a hit changed. */
+RS_INLINE int rs_frustum_leaf_block(rs_rays *r, int i, int bits, const rs_tri8 *g, int tris,
+                                    int any_hit, rs_counters *c)
+{
+    rs_stream_lanes s;
+    for (int a = 0; a < 3; ++a) {
+        s.o[a] = sw_loadu(r->o[a] + i);
+        s.d[a] = sw_loadu(r->d[a] + i);
+    }
+    s.tmin = sw_loadu(r->tmin + i);
+    s.best = sw_loadu(r->t + i);
+    s.u = sw_loadu(r->u + i);
+    s.v = sw_loadu(r->v + i);
+    s.prim = sw_ids(r->prim + i);
+    s.changed = 0;
+    for (int k = 0; k < tris; ++k) {
+        int live = bits & sw_bits(sw_lt(s.tmin, s.best));
+        if (!live)
+            break;
+        c->tri4 += rs_popcount(live);
+        s.valid = sw_from_bits(live);
+        for (int j = 0; j < 8; ++j)
+            if (g[k].id[j] != INT32_MAX)
+                rs_stream_tri(&s, &g[k].v0[0][j], &g[k].e1[0][j], &g[k].e2[0][j], 8,
+                              g[k].id[j], any_hit);
+    }
+    if (!s.changed)
+        return 0;
+    /* the lanes whose hit did not change hold the values just read */
+    sw_store(r->t + i, s.best);
+    sw_store(r->u + i, s.u);
+    sw_store(r->v + i, s.v);
+    sw_storei(r->prim + i, s.prim);
+    return 1;
+}
+
 #if RS_ISA_AVX512
 /* The 16-lane operations RS_MT_UV and RS_MT_T take (simd.h). */
 RS_INLINE __m512 rs16_add(__m512 a, __m512 b) { return _mm512_add_ps(a, b); }
@@ -397,6 +449,13 @@ RS_INLINE void rs_frustum_walk(const rs_node8 *nodes, const rs_tri8 *groups, rs_
             continue;
         const rs_tri8 *g = &groups[-top.ref - 1];
         int changed = 0;
+        for (int i = s; i + RS_SW <= ((e + 3) & ~3); i += RS_SW) {   /* dense blocks */
+            int bits = (int)((rays >> (i - s)) & ((UINT64_C(1) << RS_SW) - 1));
+            if (16 * rs_popcount(bits) >= RS_FRUSTUM_DENSE * RS_SW) {
+                changed |= rs_frustum_leaf_block(r, i, bits, g, top.tris, any_hit, c);
+                rays &= ~((uint64_t)(unsigned)bits << (i - s));
+            }
+        }
 #if RS_ISA_AVX512
         for (; rays & (rays - 1); rays &= rays - 1) {   /* two rays or more: a pair */
             int i = s + rs_lowest64(rays);
