@@ -40,7 +40,7 @@ import numpy as np
 
 import raysort
 from raysort import isa
-from raysort.bench.command import bvh_params
+from raysort.bench.command import add_bvh_argument
 from raysort.bench.report import machine_info
 from raysort.workloads import camera_rays, workload
 
@@ -141,9 +141,7 @@ def main(argv=None):
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--clock", choices=sorted(CLOCKS), default="cpu")
-    ap.add_argument("--bvh", type=bvh_params, default={}, metavar="PRESET",
-                    help="the BVH's build parameters, as raysort bench's --bvh (e.g. "
-                         "spatial_splits=0 for the plain tree); default: the BVH's defaults")
+    add_bvh_argument(ap)
     ap.add_argument("--json")
     args = ap.parse_args(argv)
     installed = set(raysort.available("traversals"))

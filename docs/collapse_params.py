@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 import raysort
-from raysort.bench.command import bvh_params
+from raysort.bench.command import add_bvh_argument
 from raysort.bvh import BVH
 from raysort.workloads import workload
 
@@ -55,8 +55,7 @@ def main():
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--variants", type=variants, default=VARIANTS, metavar="G:LEAF,...",
                     help="the (group cost, largest leaf) pairs to compare with the default")
-    ap.add_argument("--bvh", type=bvh_params, default={}, metavar="PRESET",
-                    help="the binary tree's build parameters, as raysort bench's --bvh")
+    add_bvh_argument(ap)
     args = ap.parse_args()
     scene = raysort.load_scene(args.scene)
     bvh = scene.bvh(**args.bvh)

@@ -88,6 +88,14 @@ def bvh_params(text):
     return {k: v for k, v in parse_spec("bvh:" + text).items() if k != "type"}
 
 
+def add_bvh_argument(parser):
+    """A benchmark script's ``--bvh``, as ``raysort bench``'s: parsed by :func:`bvh_params`
+    into the BVH's build parameters (``{}`` by default: the BVH's defaults)."""
+    parser.add_argument("--bvh", type=bvh_params, default={}, metavar="PRESET",
+                        help="the BVH's build parameters, as raysort bench's --bvh (e.g. "
+                             "spatial_splits=0 for the plain tree); default: the BVH's defaults")
+
+
 def check_outputs(args):
     """The chart's format; ConfigError or OutputError now, before anything runs, for an
     output path that is empty, not writable, the other output or an input file."""

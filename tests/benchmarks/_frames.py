@@ -4,7 +4,7 @@ command line, pipelines that read one BVH, and the header naming the frame and m
 import argparse
 
 import raysort
-from raysort.bench.command import bvh_params
+from raysort.bench.command import add_bvh_argument
 from raysort.bench.report import load_average, machine_info
 
 
@@ -15,9 +15,7 @@ def frame_parser(doc, size):
     p.add_argument("scene", nargs="?", default="sibenik")
     p.add_argument("--size", type=int, default=size, help=f"image edge in pixels ({size})")
     p.add_argument("--spp", type=int, default=4, help="samples per pixel (4)")
-    p.add_argument("--bvh", type=bvh_params, default={}, metavar="PRESET",
-                   help="the BVH's build parameters, as raysort bench's --bvh (e.g. "
-                        "spatial_splits=0 for the plain tree); default: the BVH's defaults")
+    add_bvh_argument(p)
     return p
 
 
