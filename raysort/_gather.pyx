@@ -102,18 +102,16 @@ def pad_rays(float[:, ::1] data, Py_ssize_t a, Py_ssize_t b):
 
 def sample_paths(const int32_t[::1] pixels, const int32_t[::1] slots,
                  const int32_t[::1] samples, int32_t[::1] pixel, int32_t[::1] sample,
-                 int32_t[::1] slot, float[:, ::1] throughput):
+                 int32_t[::1] slot):
     """Write the paths of a batch that holds, sample by sample, a pass over ``pixels``
-    (each with its accumulator row in ``slots``) into ``pixel``, ``sample``, ``slot``
-    and ``throughput`` (3, n): ``np.tile(pixels, k)``, ``np.repeat(samples, n)``,
-    ``np.tile(slots, k)`` and ones, in one pass.  ValueError at arrays of other shapes."""
+    (each with its accumulator row in ``slots``) into ``pixel``, ``sample`` and ``slot``:
+    ``np.tile(pixels, k)``, ``np.repeat(samples, n)`` and ``np.tile(slots, k)``, in one
+    pass.  ValueError at arrays of other lengths."""
     cdef Py_ssize_t n = pixels.shape[0], k = samples.shape[0], s, p, i
     if slots.shape[0] != n:
         raise ValueError("sample_paths: one slot per pixel")
-    if (pixel.shape[0] != k * n or sample.shape[0] != k * n or slot.shape[0] != k * n
-            or throughput.shape[0] != 3 or throughput.shape[1] != k * n):
-        raise ValueError("sample_paths: pixel, sample, slot (k * n,) and throughput "
-                         "(3, k * n) expected")
+    if pixel.shape[0] != k * n or sample.shape[0] != k * n or slot.shape[0] != k * n:
+        raise ValueError("sample_paths: pixel, sample and slot of k * n values expected")
     with nogil:
         for s in range(k):
             for p in range(n):
@@ -121,9 +119,6 @@ def sample_paths(const int32_t[::1] pixels, const int32_t[::1] slots,
                 pixel[i] = pixels[p]
                 sample[i] = samples[s]
                 slot[i] = slots[p]
-                throughput[0, i] = 1.0
-                throughput[1, i] = 1.0
-                throughput[2, i] = 1.0
 
 
 def follow_paths(const int32_t[::1] parent, pixel_array, sample_array, slot_array, t_array):

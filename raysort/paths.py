@@ -1,6 +1,7 @@
 """Per-path state carried from one bounce to the next, and what a shader returns."""
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -8,7 +9,28 @@ import numpy as np
 from raysort._gather import sample_paths
 from raysort.rays import RayBatch, _carve
 
-__all__ = ["Paths", "Bounce", "ShadowRays"]
+__all__ = ["Paths", "Bounce", "ShadowRays", "unit_throughput"]
+
+_LOCK = threading.Lock()
+_ONES = [np.frombuffer(b"", dtype=np.float32)]     # every block handed out, the largest last
+
+
+def unit_throughput(n):
+    """A throughput of ones for ``n`` paths, float32 ``(3, n)``, C-contiguous and
+    read-only, at no cost per call: a view of one block of immutable memory (a ``bytes``
+    object, which NumPy will not make writeable) that grows, doubling, to the largest
+    ``n`` asked for, as :func:`raysort.orders.identity_order` does for the identity
+    order.  A generated batch's paths start with it, so a batch's throughput is neither
+    written nor, read by a shader, fetched from far memory."""
+    block = _ONES[-1]           # (another thread may append a larger one: keep this one)
+    if len(block) < 3 * n:
+        with _LOCK:
+            block = _ONES[-1]
+            if len(block) < 3 * n:
+                size = max(3 * int(n), 2 * len(block))
+                block = np.frombuffer(np.ones(size, dtype=np.float32).tobytes(), np.float32)
+                _ONES.append(block)
+    return block[:3 * n].reshape(3, n)
 
 
 class Paths:
@@ -32,16 +54,16 @@ class Paths:
     @classmethod
     def _of_samples(cls, pixels, slots, samples):
         """The paths of a batch that holds, sample by sample, a pass over ``pixels`` (int32,
-        each with its accumulator row in ``slots``) for each of ``samples`` (int32), with
-        throughput 1: written in one pass into one recycled block, whose pages are
-        not faulted in again batch after batch (a generator's batch, in the pipeline)."""
+        each with its accumulator row in ``slots``) for each of ``samples`` (int32): pixel,
+        sample and slot written in one pass into one recycled block, whose pages are not
+        faulted in again batch after batch, and :func:`unit_throughput` (a generator's
+        batch, in the pipeline)."""
         n = len(pixels) * len(samples)
-        pixel, sample, slot, throughput = _carve(4 * n, 4 * n, 4 * n, 12 * n)
         paths = object.__new__(cls)
-        paths.pixel, paths.sample, paths.slot = (a.view(np.int32) for a in (pixel, sample, slot))
-        paths.throughput = throughput.view(np.float32).reshape(3, n)
-        sample_paths(pixels, slots, samples, paths.pixel, paths.sample, paths.slot,
-                     paths.throughput)
+        paths.pixel, paths.sample, paths.slot = (a.view(np.int32)
+                                                 for a in _carve(4 * n, 4 * n, 4 * n))
+        paths.throughput = unit_throughput(n)
+        sample_paths(pixels, slots, samples, paths.pixel, paths.sample, paths.slot)
         return paths
 
     def __len__(self):

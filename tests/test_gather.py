@@ -257,26 +257,22 @@ def test_sample_paths_is_tile_and_repeat(n, k):
     pixels, slots = (rng.integers(-5, 1 << 30, n).astype(np.int32) for _ in range(2))
     samples = rng.integers(0, 100, k).astype(np.int32)
     pixel, sample, slot = (np.full(n * k, 7, np.int32) for _ in range(3))
-    throughput = np.full((3, n * k), 7, np.float32)
-    sample_paths(pixels, slots, samples, pixel, sample, slot, throughput)
+    sample_paths(pixels, slots, samples, pixel, sample, slot)
     assert np.array_equal(pixel, np.tile(pixels, k))
     assert np.array_equal(sample, np.repeat(samples, n))
     assert np.array_equal(slot, np.tile(slots, k))
-    assert np.array_equal(throughput, np.ones((3, n * k)))
     with pytest.raises(ValueError, match="one slot per pixel"):
         sample_paths(pixels, slots[:-1] if n else np.zeros(1, np.int32), samples, pixel,
-                     sample, slot, throughput)
-    with pytest.raises(ValueError, match="expected"):
-        sample_paths(pixels, slots, samples, pixel, sample, slot, throughput[:2])
+                     sample, slot)
     with pytest.raises(ValueError, match="expected"):
         sample_paths(pixels, slots, samples, pixel[:-1] if n * k else np.zeros(1, np.int32),
-                     sample, slot, throughput)
+                     sample, slot)
 
 
 def test_paths_of_samples_are_the_paths_of_their_arrays():
     """``Paths._of_samples`` (the pipeline's paths of a generated batch, in a recycled
     block): the paths ``Paths`` makes of np.tile and np.repeat, throughput 1, in arrays
-    that share no memory."""
+    that share no memory; the throughput read-only."""
     from raysort.paths import Paths
 
     pixels = np.arange(10, 30, dtype=np.int32)
@@ -290,6 +286,23 @@ def test_paths_of_samples_are_the_paths_of_their_arrays():
         assert np.array_equal(got, getattr(want, name))
     arrays = [getattr(made, name) for name in Paths.__slots__]
     assert not any(np.shares_memory(a, b) for i, a in enumerate(arrays) for b in arrays[:i])
+    assert not made.throughput.flags.writeable
+
+
+def test_unit_throughput_is_ones_read_only_and_grows():
+    """``unit_throughput(n)``: float32 ones (3, n), C-contiguous, and read-only for good (its
+    memory is immutable); a larger n than any before gets a larger block, and the views
+    handed out before keep their values."""
+    from raysort.paths import unit_throughput
+
+    small = unit_throughput(5)
+    for n in (0, 1, 5, 1000, 70_000, 3):
+        u = unit_throughput(n)
+        assert u.shape == (3, n) and u.dtype == np.float32 and u.flags.c_contiguous
+        assert (u == 1).all() and not u.flags.writeable
+        with pytest.raises(ValueError):
+            u.flags.writeable = True
+    assert (small == 1).all() and small.shape == (3, 5)
 
 
 def test_follow_paths_is_fancy_indexing_and_refuses_a_parent_out_of_range():
