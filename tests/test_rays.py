@@ -475,6 +475,18 @@ def test_add_unoccluded_is_np_add_at(each_isa):
     assert np.array_equal(got.view(np.uint64), want.view(np.uint64))
 
 
+@pytest.mark.parametrize("bad", [37, -1, 2**31 - 1])
+def test_add_unoccluded_refuses_a_slot_out_of_range_and_adds_nothing(each_isa, bad):
+    """A slot that is not a row of the radiance, even an occluded ray's, is an IndexError
+    naming it, before anything is added."""
+    slot = np.arange(40, dtype=np.int32) % 37
+    slot[33] = bad
+    radiance = np.zeros((37, 3))
+    with pytest.raises(IndexError, match=r"slot\[33\]"):
+        add_unoccluded(radiance, slot, np.ones((3, 40), np.float32), np.zeros(40, bool))
+    assert not radiance.any()
+
+
 @pytest.mark.parametrize("order, offsets", [
     ([0, 1, 1, 3], [0, 4]),            # a ray twice
     ([0, 1, 2, 7], [0, 4]),            # a ray beyond the batch
