@@ -8,8 +8,31 @@ import numpy as np
 
 __all__ = ["identity_order", "is_identity_order"]
 
-_LOCK = threading.Lock()
-_BLOCKS = [np.frombuffer(b"", dtype=np.int32)]     # every block handed out, the largest last
+class _FrozenPrefixes:
+    """Prefixes of one block of immutable memory (a ``bytes`` object, which NumPy will not
+    make writeable) that grows, doubling, to the longest prefix asked for: read-only
+    arrays at no cost per call.  ``fill(size)`` makes a grown block's values; every block
+    handed out is kept in ``blocks`` (the largest last), as views of it may be in use."""
+
+    def __init__(self, fill):
+        self._fill = fill
+        self._lock = threading.Lock()
+        self.blocks = [np.frombuffer(b"", dtype=fill(0).dtype)]
+
+    def prefix(self, n):
+        """The first ``n`` values, a read-only view."""
+        block = self.blocks[-1]     # (another thread may append a larger one: keep this one)
+        if len(block) < n:
+            with self._lock:
+                block = self.blocks[-1]
+                if len(block) < n:
+                    size = max(int(n), 2 * len(block))
+                    block = np.frombuffer(self._fill(size).tobytes(), block.dtype)
+                    self.blocks.append(block)
+        return block[:n]
+
+
+_IDENTITY = _FrozenPrefixes(lambda size: np.arange(size, dtype=np.int32))
 
 
 def identity_order(n):
@@ -18,15 +41,7 @@ def identity_order(n):
     that grows, doubling, to the largest ``n`` asked for.  A sorter that keeps the
     rays' order returns it, and the pipeline's check of the sorter's result then knows
     the order for a permutation without a pass over it (:func:`is_identity_order`)."""
-    block = _BLOCKS[-1]         # (another thread may append a larger one: keep this one)
-    if len(block) < n:
-        with _LOCK:
-            block = _BLOCKS[-1]
-            if len(block) < n:
-                size = max(int(n), 2 * len(block))
-                block = np.frombuffer(np.arange(size, dtype=np.int32).tobytes(), np.int32)
-                _BLOCKS.append(block)
-    return block[:n]
+    return _IDENTITY.prefix(n)
 
 
 def is_identity_order(order):
@@ -35,5 +50,5 @@ def is_identity_order(order):
     can write that memory."""
     base = getattr(order, "base", None)
     return (type(order) is np.ndarray and order.dtype == np.int32 and order.ndim == 1
-            and order.strides == (4,) and any(base is block for block in _BLOCKS)
+            and order.strides == (4,) and any(base is block for block in _IDENTITY.blocks)
             and order.ctypes.data == base.ctypes.data)

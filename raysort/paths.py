@@ -1,36 +1,26 @@
 """Per-path state carried from one bounce to the next, and what a shader returns."""
 from __future__ import annotations
 
-import threading
 from dataclasses import dataclass
 
 import numpy as np
 
 from raysort._gather import sample_paths
+from raysort.orders import _FrozenPrefixes
 from raysort.rays import RayBatch, _carve
 
 __all__ = ["Paths", "Bounce", "ShadowRays", "unit_throughput"]
 
-_LOCK = threading.Lock()
-_ONES = [np.frombuffer(b"", dtype=np.float32)]     # every block handed out, the largest last
+_ONES = _FrozenPrefixes(lambda size: np.ones(size, dtype=np.float32))
 
 
 def unit_throughput(n):
     """A throughput of ones for ``n`` paths, float32 ``(3, n)``, C-contiguous and
-    read-only, at no cost per call: a view of one block of immutable memory (a ``bytes``
-    object, which NumPy will not make writeable) that grows, doubling, to the largest
-    ``n`` asked for, as :func:`raysort.orders.identity_order` does for the identity
-    order.  A generated batch's paths start with it, so a batch's throughput is neither
-    written nor, read by a shader, fetched from far memory."""
-    block = _ONES[-1]           # (another thread may append a larger one: keep this one)
-    if len(block) < 3 * n:
-        with _LOCK:
-            block = _ONES[-1]
-            if len(block) < 3 * n:
-                size = max(3 * int(n), 2 * len(block))
-                block = np.frombuffer(np.ones(size, dtype=np.float32).tobytes(), np.float32)
-                _ONES.append(block)
-    return block[:3 * n].reshape(3, n)
+    read-only, at no cost per call: a view of one block of immutable memory that grows,
+    doubling, to the largest ``n`` asked for, as :func:`raysort.orders.identity_order`
+    does for the identity order.  A generated batch's paths start with it, so a batch's
+    throughput is neither written nor, read by a shader, fetched from far memory."""
+    return _ONES.prefix(3 * n).reshape(3, n)
 
 
 class Paths:
