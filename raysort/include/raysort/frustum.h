@@ -48,9 +48,7 @@
 /* The fewest of a block's RS_SW lanes entering a leaf (in sixteenths of the
  * block) that take rs_frustum_leaf_block, a triangle at a time for the block,
  * rather than a ray (or, on AVX-512, two) at a time. */
-#ifndef RS_FRUSTUM_DENSE
 #define RS_FRUSTUM_DENSE 8
-#endif
 
 /* A box the chunk waits to visit: child `slot` of node8 `parent`. */
 typedef struct rs_frustum_entry {
