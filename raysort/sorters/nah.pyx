@@ -11,12 +11,18 @@ Per large packet, in linear time and touching only ray indices:
    becomes sub-packets of at most ``packet_size`` rays (64, Manta's
    ``RayPacket::MaxSize``, which bounded the paper's sub-packets).
 
+Camera rays, and shadow rays toward a light, come in long runs of one bucket:
+where a large packet's buckets average ``LONG_RUNS`` rays or more per run, the
+origin bounds, the cells and the counting sort go a run at a time (a vector
+min and max over the run's origins, one piece of the order per run) instead
+of ray by ray, with the same result.
+
 Rays with NaN components land in a defined bucket and cell (comparisons with
 NaN are false), so the sorter never fails on them; the gather marks them
 inactive.
 """
-from libc.stdint cimport int32_t, uint8_t
-from libc.math cimport INFINITY, fabsf
+from libc.stdint cimport int32_t, uint8_t, uint32_t
+from libc.math cimport INFINITY
 from raysort._types cimport (rs_minf, rs_maxf, RS_RAY_OX, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ,
                              RS_RAY_ROWS)
 
@@ -28,6 +34,144 @@ from raysort.sdk import (MAX_PACKET, ConfigError, Sorter, check_packets, fixed_p
 
 cdef extern from *:
     """
+    #include "raysort/lanes.h"
+    /* octant * 3 + major axis; octant bit k is set when component k is negative.  The
+     * major axis is the first of the largest |components| (y beats x only when larger,
+     * z beats the larger of them only when larger), chosen without branches: for
+     * diffuse rays a branch on it would mispredict every other ray. */
+    static inline int rs_nah_bucket(float dx, float dy, float dz)
+    {
+        int octant = (dx < 0) | (dy < 0) << 1 | (dz < 0) << 2;
+        float ax = fabsf(dx), ay = fabsf(dy), az = fabsf(dz);
+        int y_wins = ay > ax;
+        int z_wins = az > rs_maxf(ay, ax);
+        return octant * 3 + y_wins + z_wins * (2 - y_wins);
+    }
+    /* key[i] = the bucket of ray i, in a loop the compiler vectorises */
+    static void rs_nah_buckets(const float *RS_RESTRICT dx, const float *RS_RESTRICT dy,
+                               const float *RS_RESTRICT dz, int n, uint8_t *RS_RESTRICT key)
+    {
+        for (int i = 0; i < n; ++i)
+            key[i] = (uint8_t)rs_nah_bucket(dx[i], dy[i], dz[i]);
+    }
+    /* How many times key[i] != key[i - 1] in key[0, n): the runs of equal keys, less
+     * one (a loop the compiler vectorises). */
+    static int rs_nah_changes(const uint8_t *key, int n)
+    {
+        int c = 0;
+        for (int i = 1; i < n; ++i)
+            c += key[i] != key[i - 1];
+        return c;
+    }
+    /* The buckets present in key[0, n), bit b for bucket b (a vectorised loop). */
+    static uint32_t rs_nah_present(const uint8_t *key, int n)
+    {
+        uint32_t present = 0;
+        for (int i = 0; i < n; ++i)
+            present |= 1u << (key[i] & 31);
+        return present;
+    }
+    /* Where the run of key[i] that starts at i ends: eight keys at a time. */
+    static inline int rs_nah_run_end(const uint8_t *key, int i, int n)
+    {
+        uint64_t eight = 0x0101010101010101ull * key[i], word;
+        int e = i + 1;
+        for (; e + 8 <= n; e += 8) {
+            memcpy(&word, key + e, 8);
+            if (word != eight)
+                break;
+        }
+        while (e < n && key[e] == key[i])
+            ++e;
+        return e;
+    }
+    /* Grow lo, hi (3 each) by rs_minf(x, lo) and rs_maxf(x, hi) over the m values of
+     * each row o[a]: RS_SW lanes at a time, then across the lanes.  The same min and
+     * max as ray by ray (NaN is skipped either way, as MINPS/MAXPS return the second
+     * operand; only the sign of a zero bound may differ, which no cell test sees). */
+    static void rs_nah_grow(const float *const o[3], int m, float *lo, float *hi)
+    {
+        for (int a = 0; a < 3; ++a) {
+            const float *x = o[a];
+            float l = lo[a], h = hi[a];
+            int j = 0;
+            if (m >= RS_SW) {
+                rs_swf vl = sw_set1(INFINITY), vh = sw_set1(-INFINITY);
+                float tl[RS_SW], th[RS_SW];
+                for (; j + RS_SW <= m; j += RS_SW) {
+                    rs_swf v = sw_loadu(x + j);
+                    vl = sw_min(v, vl);
+                    vh = sw_max(v, vh);
+                }
+                sw_store(tl, vl);
+                sw_store(th, vh);
+                for (int k = 0; k < RS_SW; ++k) {
+                    l = rs_minf(tl[k], l);
+                    h = rs_maxf(th[k], h);
+                }
+            }
+            for (; j < m; ++j) {
+                l = rs_minf(x[j], l);
+                h = rs_maxf(x[j], h);
+            }
+            lo[a] = l;
+            hi[a] = h;
+        }
+    }
+    /* Pass 1's bounds for rays whose buckets come in long runs (camera and shadow rays):
+     * each run of rays start + [i, e) with one bucket grows that bucket's origin box a
+     * vector at a time, instead of every ray updating its bucket's box in turn (a chain
+     * through memory). */
+    static void rs_nah_run_bounds(const float *const o[3], int start, const uint8_t *key,
+                                  int n, float (*lo)[3], float (*hi)[3])
+    {
+        const float *at[3];
+        for (int i = 0, e; i < n; i = e) {
+            e = rs_nah_run_end(key, i, n);
+            for (int a = 0; a < 3; ++a)
+                at[a] = o[a] + start + i;
+            rs_nah_grow(at, e - i, lo[key[i]], hi[key[i]]);
+        }
+    }
+    /* Pass 2 for buckets in long runs: key = bucket * 8 + origin-grid cell, a run of
+     * one bucket at a time, its grid's middles and split axes fixed (grid_cell's bits:
+     * one per split axis, in axis order). */
+    static void rs_nah_run_cells(const float *const o[3], int start, uint8_t *key, int n,
+                                 const uint8_t *axes, const float (*mid)[3])
+    {
+        const float *x = o[0] + start, *y = o[1] + start, *z = o[2] + start;
+        for (int i = 0, e; i < n; i = e) {
+            e = rs_nah_run_end(key, i, n);
+            int b = key[i], s0 = axes[b] & 1, s1 = axes[b] >> 1 & 1, s2 = axes[b] >> 2 & 1;
+            int bit1 = s0, bit2 = s0 + s1;
+            float m0 = mid[b][0], m1 = mid[b][1], m2 = mid[b][2];
+            for (int j = i; j < e; ++j)
+                key[j] = (uint8_t)(b * 8 + (((x[j] >= m0) & s0) | ((y[j] >= m1) & s1) << bit1
+                                           | ((z[j] >= m2) & s2) << bit2));
+        }
+    }
+    /* The counting sort for keys in long runs: the counts by run, then each run's rays
+     * written in one piece at its key's place (the same order as ray by ray). */
+    static void rs_nah_count_runs(const uint8_t *key, int n, int *count)
+    {
+        for (int i = 0, e; i < n; i = e) {
+            e = rs_nah_run_end(key, i, n);
+            count[key[i]] += e - i;
+        }
+    }
+    static void rs_nah_place_runs(const uint8_t *key, int start, int end, const int *count,
+                                  int n_keys, int32_t *order)
+    {
+        int at[256];            /* a key is a byte */
+        memcpy(at, count, n_keys * sizeof(int));
+        for (int i = 0, e; i < end - start; i = e) {
+            e = rs_nah_run_end(key, i, end - start);
+            int32_t *out = order + at[key[i]];
+            at[key[i]] += e - i;
+            for (int j = 0; j < e - i; ++j)
+                out[j] = start + i + j;
+        }
+    }
     /* The counting sort's last step: ray i goes to order[count[key]++].  Functions of
      * their own (not inlined into sort_packet), each a loop that keeps everything in
      * registers.  How fast a count's update reaches the next load of the same count
@@ -73,24 +217,24 @@ cdef extern from *:
     void place_coherent "rs_nah_place_coherent"(const uint8_t *key, int start, int end,
                                                 const int *count, int n_keys,
                                                 int32_t *order) noexcept nogil
+    void buckets "rs_nah_buckets"(const float *dx, const float *dy, const float *dz, int n,
+                                  uint8_t *key) noexcept nogil
+    int changes "rs_nah_changes"(const uint8_t *key, int n) noexcept nogil
+    uint32_t present_buckets "rs_nah_present"(const uint8_t *key, int n) noexcept nogil
+    void run_bounds "rs_nah_run_bounds"(const float *const *o, int start, const uint8_t *key,
+                                        int n, float (*lo)[3], float (*hi)[3]) noexcept nogil
+    void run_cells "rs_nah_run_cells"(const float *const *o, int start, uint8_t *key, int n,
+                                      const uint8_t *axes, const float (*mid)[3]) noexcept nogil
+    void count_runs "rs_nah_count_runs"(const uint8_t *key, int n, int *count) noexcept nogil
+    void place_runs "rs_nah_place_runs"(const uint8_t *key, int start, int end,
+                                        const int *count, int n_keys,
+                                        int32_t *order) noexcept nogil
 
 
 cdef enum:
     BUCKETS = 24            # direction buckets: octant x major axis
     KEYS = BUCKETS * 8      # (bucket, origin-grid cell)
-
-
-cdef inline int direction_bucket(float dx, float dy, float dz) noexcept nogil:
-    """octant * 3 + major axis; octant bit k is set when component k is negative.
-
-    The major axis is the first of the largest |components| (y beats x only when
-    larger, z beats the larger of them only when larger), chosen without branches:
-    for diffuse rays a branch on it would mispredict every other ray."""
-    cdef int octant = (dx < 0) | (dy < 0) << 1 | (dz < 0) << 2
-    cdef float ax = fabsf(dx), ay = fabsf(dy), az = fabsf(dz)
-    cdef int y_wins = ay > ax
-    cdef int z_wins = az > rs_maxf(ay, ax)      # rs_maxf(ay, ax) = ay > ax ? ay : ax
-    return octant * 3 + y_wins + z_wins * (2 - y_wins)
+    LONG_RUNS = 8           # a packet whose keys' runs average this many rays goes by run
 
 
 cdef void split_axes(const float *lo, const float *hi, const float *root_extent,
@@ -140,33 +284,61 @@ cdef int sort_packet(const float[:, ::1] rays, int start, int end, const float *
     cdef float mid[BUCKETS][3]
     cdef uint8_t axes[BUCKETS]
     cdef int count[KEYS]
-    cdef int i, a, b, k, pos, piece, n_sub = 0, most = 0
+    cdef int i, a, b, k, pos, piece, n_sub = 0, most = 0, n = end - start
+    cdef uint8_t split = 0
+    cdef uint32_t present              # bit b: some ray is in bucket b
+    cdef bint runs
+    cdef const float *origin[3]
+    if n == 0:
+        return 0
     for b in range(BUCKETS):
         for a in range(3):
             lo[b][a] = INFINITY
             hi[b][a] = -INFINITY
     for k in range(KEYS):
         count[k] = 0
-    # pass 1: direction buckets (indices only) and per-bucket origin bounds
-    for i in range(start, end):
-        b = direction_bucket(rays[RS_RAY_DX, i], rays[RS_RAY_DY, i], rays[RS_RAY_DZ, i])
-        key[i - start] = <uint8_t> b
-        for a in range(3):
-            lo[b][a] = rs_minf(rays[RS_RAY_OX + a, i], lo[b][a])
-            hi[b][a] = rs_maxf(rays[RS_RAY_OX + a, i], hi[b][a])
+    # pass 1: direction buckets (indices only) and per-bucket origin bounds, by runs of
+    # one bucket where they are long (coherent rays), else ray by ray
+    buckets(&rays[RS_RAY_DX, start], &rays[RS_RAY_DY, start], &rays[RS_RAY_DZ, start], n, key)
+    runs = n >= LONG_RUNS * (changes(key, n) + 1)
+    present = present_buckets(key, n)
+    for a in range(3):
+        origin[a] = &rays[RS_RAY_OX + a, 0]
+    if runs:
+        run_bounds(origin, start, key, n, lo, hi)
+    else:
+        for i in range(start, end):
+            b = key[i - start]
+            for a in range(3):
+                lo[b][a] = rs_minf(rays[RS_RAY_OX + a, i], lo[b][a])
+                hi[b][a] = rs_maxf(rays[RS_RAY_OX + a, i], hi[b][a])
     for b in range(BUCKETS):
         split_axes(lo[b], hi[b], root_extent, threshold, max_axes, &axes[b], mid[b])
-    # pass 2: origin-grid cell; then a counting sort on (bucket, cell)
-    for i in range(start, end):
-        b = key[i - start]
-        k = grid_cell(rays, i, axes[b], mid[b])
-        if bucket_out != NULL:
-            bucket_out[i] = <uint8_t> b
-            cell_out[i] = <uint8_t> k
-        key[i - start] = <uint8_t> (b * 8 + k)
-    count_keys(key, end - start, count)
+        split |= axes[b]
+    # pass 2: origin-grid cell (always 0 where no bucket splits: camera rays); then a
+    # counting sort on (bucket, cell)
+    if split == 0 and bucket_out == NULL:
+        for i in range(n):
+            key[i] = key[i] * 8
+    elif runs and bucket_out == NULL:
+        run_cells(origin, start, key, n, axes, mid)
+    else:
+        for i in range(start, end):
+            b = key[i - start]
+            k = grid_cell(rays, i, axes[b], mid[b])
+            if bucket_out != NULL:
+                bucket_out[i] = <uint8_t> b
+                cell_out[i] = <uint8_t> k
+            key[i - start] = <uint8_t> (b * 8 + k)
+    runs = runs and n >= LONG_RUNS * (changes(key, n) + 1)
+    if runs:
+        count_runs(key, n, count)
+    else:
+        count_keys(key, n, count)
     pos = start
     for k in range(KEYS):
+        if not present >> (k >> 3) & 1:     # a bucket no ray is in (count 0)
+            continue
         piece = 0
         while piece < count[k]:
             offsets[n_sub] = pos + piece
@@ -176,8 +348,11 @@ cdef int sort_packet(const float[:, ::1] rays, int start, int end, const float *
         count[k] = pos
         pos += a
         most = max(most, a)
-    # coherent rays: one key holds most of them (see rs_nah_place)
-    if 2 * most > end - start:
+    # coherent rays: in long runs of one key, or one key holds most of them (see
+    # rs_nah_place)
+    if runs:
+        place_runs(key, start, end, count, KEYS, order)
+    elif 2 * most > end - start:
         place_coherent(key, start, end, count, KEYS, order)
     else:
         place(key, start, end, count, order)

@@ -17,8 +17,9 @@ first, or the script exits with 1.  The module must be one the pipeline reaches 
 file, so both builds live in the process side by side.  Run with ``RAYSORT_ISA`` set to
 the ISA whose build was copied.
 
-With ``--rays camera`` (or ``diffuse``) it traces, instead of frames, the primary (or
-first-bounce diffuse) rays of a ``--size`` x ``--size`` image at 1 spp through
+With ``--rays camera`` (or ``diffuse``, or ``shadow``) it traces, instead of frames, the
+primary (or first-bounce diffuse, or the camera hits' any-hit shadow) rays of a ``--size``
+x ``--size`` image at 1 spp through
 ``Pipeline.trace`` (sort, gather, traverse, scatter; plugin checks off): ``--calls`` calls
 per build and round, the round's median call, and prints each build's Mrays/s and the
 per-round speed-up of the new build (the old build's time over the new one's).  The hits
@@ -97,8 +98,8 @@ def trace_rounds(args, builds):
     if args.rays == "camera":
         work = camera_rays(scene, width=args.size, height=args.size, spp=1, seed=1)[0]
     else:
-        work = workload(scene, "diffuse:depth=1", width=args.size, height=args.size, spp=1,
-                        seed=1)
+        kind = "shadow" if args.rays == "shadow" else "diffuse:depth=1"
+        work = workload(scene, kind, width=args.size, height=args.size, spp=1, seed=1)
     pipe = raysort.Pipeline(scene, threads=1, check_plugins=False, sorter=args.sorter,
                             traversal=args.traversal)
     args.spp = 1
@@ -116,16 +117,15 @@ def trace_rounds(args, builds):
             for _ in range(args.calls):
                 before = build.seconds
                 start = time.thread_time()
-                hits, _ = pipe.trace(work.rays, work.packets)
+                hits, _ = pipe.trace(work.rays, work.packets, any_hit=work.any_hit)
                 calls.append(time.thread_time() - start)
                 inner.append(build.seconds - before)
             if r:
                 times[key].append(statistics.median(calls))
                 function[key].append(statistics.median(inner))
-            if first is None:
-                first = (hits.t.copy(), hits.prim.copy())
-            same = same and np.array_equal(hits.t, first[0]) and np.array_equal(hits.prim,
-                                                                                first[1])
+            found = (hits.copy(),) if work.any_hit else (hits.t.copy(), hits.prim.copy())
+            first = found if first is None else first
+            same = same and all(np.array_equal(a, b) for a, b in zip(found, first))
     del isa._modules[args.module]
     n = len(work.rays)
     print(f"every call's hits bit-identical: {same}")
@@ -154,7 +154,7 @@ def main(argv=None):
     parser.add_argument("--function", default="",
                         help="also time this function of the module (e.g. _shade)")
     parser.add_argument("--threads", type=int, default=1, help="render threads (1)")
-    parser.add_argument("--rays", choices=["camera", "diffuse"],
+    parser.add_argument("--rays", choices=["camera", "diffuse", "shadow"],
                         help="trace these rays of the image instead of rendering frames")
     parser.add_argument("--calls", type=int, default=10,
                         help="with --rays: calls per build and round (10)")

@@ -32,7 +32,7 @@ import numpy as np
 from raysort import isa, registry
 from raysort.bench.report import load_average, machine_info
 from raysort.bench.rounds import run_rounds, summary
-from raysort.rays import MAX_PACKET, Hits, gather_checked, scatter
+from raysort.rays import MAX_PACKET, Hits, gather_checked, scatter, scatter_occluded
 from raysort.scene import load_scene
 from raysort.workloads import workload
 
@@ -65,7 +65,7 @@ class Config:
     def __call__(self):
         w = self.work
         packets_in, bounds = w.packets.copy(), self.bvh.bounds.copy()
-        out = np.empty((4, len(w)), np.float32)
+        out = np.empty(len(w), np.uint8) if w.any_hit else np.empty((4, len(w)), np.float32)
         t0 = time.thread_time()
         order, offsets = self.sorter.sort(w.rays, packets_in, bounds)
         t1 = time.thread_time()
@@ -74,15 +74,15 @@ class Config:
                                                        MAX_PACKET)[0] == 0
             t2 = time.thread_time()
             self.traversal._intersect_batch(self.bvh, w.rays.data, order, offsets, 0,
-                                            len(offsets) - 1, False, out)
+                                            len(offsets) - 1, w.any_hit, out)
             t3 = time.thread_time()
-            self.hits = Hits._of_block(out)
+            self.hits = out.view(bool) if w.any_hit else Hits._of_block(out)
         else:
             packets = gather_checked(w.rays, order, offsets, w.packets)[0]
             t2 = time.thread_time()
-            self.traversal.intersect(self.bvh, packets, any_hit=False)
+            self.traversal.intersect(self.bvh, packets, any_hit=w.any_hit)
             t3 = time.thread_time()
-            self.hits = scatter(packets, len(w))
+            self.hits = (scatter_occluded if w.any_hit else scatter)(packets, len(w))
         self.sort.append(t1 - t0)
         self.gather.append(t2 - t1)
         self.trace.append(t3 - t2)
@@ -97,6 +97,8 @@ class Config:
 
 
 def same_hits(a, b):
+    if isinstance(a, np.ndarray):       # any-hit: occluded or not
+        return bool(np.array_equal(a, b))
     return bool(np.array_equal(a.t.view(np.uint32), b.t.view(np.uint32))
                 and np.array_equal(a.prim, b.prim))
 
@@ -161,6 +163,9 @@ def main(argv=None):
     parser.add_argument("--rounds", type=int, default=7, help="timed rounds (7)")
     parser.add_argument("--size", type=int, default=256, help="image edge in pixels (256)")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--rays", default="diffuse",
+                        help="the workload kind (raysort.workloads: primary, diffuse, shadow, "
+                             "ao; default diffuse)")
     parser.add_argument("--json", default=None, help="also write the results here")
     parser.add_argument("--markdown", action="store_true", help="also print Markdown tables")
     parser.add_argument("--packets", action="store_true",
@@ -177,7 +182,7 @@ def main(argv=None):
     traversals = args.traversals.split(",")
     machine = machine_info()
     report = {"machine": machine, "load": {"before": load_average()}, "rounds": args.rounds,
-              "size": args.size, "seed": args.seed, "scenes": {}}
+              "size": args.size, "seed": args.seed, "rays": args.rays, "scenes": {}}
     print(f"CPU {machine['cpu']}, {machine['cores']} cores, ISA {machine['isa']}, "
           f"load {report['load']['before']}; thread-CPU ms, median [min-max] of "
           f"{args.rounds} interleaved rounds; share = (sort + gather) / trace, per round")
@@ -185,7 +190,7 @@ def main(argv=None):
     for j, spec in enumerate(args.scenes):
         scene = load_scene(spec)
         bvh = scene.bvh()
-        work = workload(scene, "diffuse", width=args.size, height=args.size, seed=args.seed)
+        work = workload(scene, args.rays, width=args.size, height=args.size, seed=args.seed)
         configs = [Config(s, t, bvh, work, packets) for s in sorters for t in traversals
                    for packets in ((False, True) if args.packets else (False,))
                    if not packets or reads_batch(registry.create("traversals", t))]
@@ -196,7 +201,7 @@ def main(argv=None):
             failed |= not r["identical_hits"]
         report["scenes"][scene.name] = {"rays": len(work), "triangles": scene.n_triangles,
                                         "rows": rows}
-        print(f"\n{scene.name}: {len(work)} first-bounce diffuse rays, "
+        print(f"\n{scene.name}: {len(work)} {args.rays} rays, "
               f"{scene.n_triangles} triangles")
         print(f"{'sorter':18s}{'traversal':10s}{'sort ms':>22s}{'gather ms':>22s}"
               f"{'trace ms':>24s}   share")

@@ -142,18 +142,51 @@ def tricky_random(seed=99, n=2000):
     return rays, packets, box
 
 
+def coherent_runs(seed=5):
+    """Rays in runs of one direction bucket, as camera and shadow rays come: runs of 1 to
+    600 rays (around the kernel's run rule of 8 on average, and its vector widths), some
+    packets with one origin (no grid split), some whose origins alternate across a
+    bucket's middle inside long runs (long bucket runs, short cell runs), NaN, infinite,
+    -0.0 and +0.0 origin components inside runs, and uneven large packets."""
+    rng = np.random.default_rng(seed)
+    heads = np.array([[1, 0.1, 0.2], [-1, 0.3, 0.1], [0.1, 1, 0], [0.2, -0.3, -1],
+                      [0.5, 0.5, 0.5], [-0.7, -0.7, 0.1]], dtype=np.float64)
+    lengths = [1, 7, 8, 9, 15, 16, 17, 33, 200, 600, 3, 64, 5, 2, 31, 120]
+    dirs, origins = [], []
+    for j, length in enumerate(lengths * 3):
+        d = np.repeat(heads[j % len(heads)][None], length, axis=0)
+        d += rng.normal(scale=1e-3, size=d.shape)                # the same bucket
+        o = rng.random((length, 3)) * [4, 2, 1] - [2, 1, 0]
+        if j % 5 == 0:
+            o[:] = [0.25, -0.5, 0.5]                             # one origin
+        if j % 7 == 3:
+            o[:, 0] = np.where(np.arange(length) % 2, -1.5, 1.5)  # alternate across the middle
+        dirs.append(d)
+        origins.append(o)
+    d, o = np.concatenate(dirs), np.concatenate(origins)
+    n = len(d)
+    o[rng.choice(n, 40, replace=False), rng.integers(0, 3, 40)] = np.nan
+    o[rng.choice(n, 20, replace=False), rng.integers(0, 3, 20)] = np.inf
+    o[rng.choice(n, 60, replace=False), rng.integers(0, 3, 60)] = rng.choice([-0.0, 0.0], 60)
+    rays = RayBatch.from_arrays(o, d)
+    packets = np.array([0, 1, 9, 700, 700, 1724, 2500, 3100, n], dtype=np.int32)
+    return rays, packets, np.array([[-2, -1, 0], [2, 1, 1]], dtype=np.float32)
+
+
 @pytest.fixture(scope="module")
 def datasets(sibenik, sponza, workloads):
     sets = {}
     for scene in (sibenik, sponza):
-        for kind in ("primary", "diffuse"):
+        for kind in ("primary", "diffuse", "shadow"):
             w = workloads(scene, kind)
             sets[f"{scene.name}-{kind}"] = (w.rays, w.packets, scene.bvh().bounds)
     sets["random"] = tricky_random()
+    sets["coherent"] = coherent_runs()
     return sets
 
 
-DATASETS = ["sibenik-primary", "sibenik-diffuse", "sponza-primary", "sponza-diffuse", "random"]
+DATASETS = ["sibenik-primary", "sibenik-diffuse", "sibenik-shadow", "sponza-primary",
+            "sponza-diffuse", "sponza-shadow", "random", "coherent"]
 
 
 @pytest.fixture(scope="module")
@@ -474,7 +507,7 @@ def groups_of(order, bucket, cell, run_of):
 
 @pytest.mark.parametrize("large_packet", LARGE_PACKETS)
 @pytest.mark.parametrize("packet_size", PACKET_SIZES)
-@pytest.mark.parametrize("data", ["sibenik-diffuse", "random"])
+@pytest.mark.parametrize("data", ["sibenik-diffuse", "random", "coherent"])
 def test_sub_packet_rules(datasets, data, packet_size, large_packet):
     """Sub-packets: one cell of one run each, at most packet_size rays, only the last piece
     of a cell shorter, no sub-packet for an empty cell, ray indices increasing in a cell."""
