@@ -29,8 +29,9 @@ must be bit-identical.
     python tests/benchmarks/kernel_ab.py traversals.stream /tmp/old-stream.so sponza \
         --rays camera --size 256 --rounds 9
 
-``--sorter`` and ``--traversal`` choose the pipeline's plugins for ``--rays``; with
-``--function`` it then also prints that function's median time per call (so a sorter's
+``--sorter`` and ``--traversal`` choose the pipeline's plugins (for frames and for
+``--rays``; default: ``none`` and the default traversal); with ``--rays`` and
+``--function`` it also prints that function's median time per call (so a sorter's
 kernel is timed where a render calls it: after a trace, with the cache as the trace left it):
 
     cp raysort/_isa/avx512/sorters/_keysort.cpython-*.so /tmp/old-keysort.so
@@ -158,15 +159,16 @@ def main(argv=None):
                         help="trace these rays of the image instead of rendering frames")
     parser.add_argument("--calls", type=int, default=10,
                         help="with --rays: calls per build and round (10)")
-    parser.add_argument("--sorter", default="none", help="with --rays: the sorter (none)")
+    parser.add_argument("--sorter", default="none", help="the pipeline's sorter (none)")
     parser.add_argument("--traversal", default=None,
-                        help="with --rays: the traversal (the pipeline's default)")
+                        help="the pipeline's traversal (its default)")
     args = parser.parse_args(argv)
     builds = {"old": TimedModule(load_copy(args.module, args.old), args.function),
               "new": TimedModule(isa.module(args.module), args.function)}
     if args.rays:
         return trace_rounds(args, builds)
-    pipe = raysort.Pipeline(args.scene, threads=args.threads)
+    pipe = raysort.Pipeline(args.scene, threads=args.threads, sorter=args.sorter,
+                            traversal=args.traversal)
     print_header(args, pipe)
     print(f"module {args.module}: old {args.old}, new {builds['new'].module.__file__}")
     pipe.render(64, 64, spp=1, seed=1)                  # builds the trees
