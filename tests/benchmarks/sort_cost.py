@@ -1,13 +1,15 @@
 """What sorting costs next to the fast traversals: sort, gather and trace of the same rays.
 
     python tests/benchmarks/sort_cost.py [scene ...] [--sorters a,b] [--traversals wide8,stream]
-                                         [--rounds 7] [--size 256] [--json out.json]
-                                         [--markdown]
+                                         [--rounds 7] [--size 256] [--rays diffuse]
+                                         [--json out.json] [--markdown]
     python tests/benchmarks/sort_cost.py --medians run1.json run2.json ...
 
 For each scene (default: sibenik, sponza, forest) the first-bounce diffuse rays of a
 ``--size`` square render at 1 spp (:func:`raysort.workloads.workload`, the rays ``raysort
-bench --kernels`` measures) are, for every sorter (default: every installed one) and every
+bench --kernels`` measures; ``--rays`` names another workload kind, e.g. ``primary``,
+``diffuse:depth=2`` or ``shadow``, whose any-hit rays are traced as any-hit queries) are,
+for every sorter (default: every installed one) and every
 traversal, sorted, gathered and traced, and each of the three is timed by the thread's CPU
 clock (``time.thread_time``: one thread, so other jobs on the machine count less than in wall
 time).  The gather is the pipeline's gather stage (:func:`raysort.rays.gather_checked`, which
