@@ -822,6 +822,19 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
         all_or |= keys[i]
         c += keys[i] != keys[i - 1]
     compress = compress and 2 * c <= n
+    if not compress:
+        # already in order (coherent rays often are: camera rays in their tile's Morton
+        # order)?  Then the stable sort leaves every ray where it is.  (A loop that stops
+        # at the first descent, which a packet not in order mostly shows early; not
+        # where long runs of equal keys make the compressed sort cheap anyway.)
+        i = 1
+        while i < n and (keys[i] & mask) >= (keys[i - 1] & mask):
+            i += 1
+        if i >= n:
+            for i in range(n):
+                order[start + i] = start + i
+            return cut_packets(keys, n, start, packet_size, split_bits, split_bits <= bits,
+                               offsets)
     simple = packed and not compress
     if simple and COMPACT_SORT:
         c = sort_compact(keys, n, start, (all_and ^ all_or) & mask, split_bits,
