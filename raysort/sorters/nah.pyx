@@ -26,6 +26,8 @@ from libc.math cimport INFINITY
 from raysort._types cimport (rs_minf, rs_maxf, RS_RAY_OX, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ,
                              RS_RAY_ROWS)
 
+import operator
+
 import numpy as np
 
 from raysort import isa
@@ -429,15 +431,22 @@ class NahSorter(Sorter):
         self.threshold, self.max_cells, self.packet_size, self.large_packet = self._params()
 
     def _params(self):
-        """The parameters, checked (again at every sort: the kernel's bounds rest on
-        them, and a script may have set an attribute since)."""
+        """The parameters, checked (again at every sort where an attribute is not the
+        object last checked: the kernel's bounds rest on them, and a script may have
+        set one since)."""
+        raw = (self.threshold, self.max_cells, self.packet_size, self.large_packet)
+        last = self.__dict__.get("_checked")
+        if last is not None and all(map(operator.is_, raw, last[0])):
+            return last[1]
         max_cells = self.max_cells
         if isinstance(max_cells, bool) or max_cells not in (1, 2, 4, 8):
             raise ConfigError(f"max_cells must be 1, 2, 4 or 8, got {max_cells!r}")
-        return (number("threshold", self.threshold, 0), int(max_cells),
-                integer("packet_size", self.packet_size, 1, MAX_PACKET),
-                None if self.large_packet is None else
-                integer("large_packet", self.large_packet, 1, MAX_PACKET))
+        params = (number("threshold", self.threshold, 0), int(max_cells),
+                  integer("packet_size", self.packet_size, 1, MAX_PACKET),
+                  None if self.large_packet is None else
+                  integer("large_packet", self.large_packet, 1, MAX_PACKET))
+        self._checked = (raw, params)
+        return params
 
     def _packets(self, packets, n, params=None):
         """The large packets of ``n`` rays, checked, cut to ``large_packet`` (of
@@ -447,16 +456,27 @@ class NahSorter(Sorter):
         return packets if large_packet is None else fixed_packets(packets, large_packet)
 
     def _run(self, rays, packets, bounds, bucket=None, cell=None):
-        params = threshold, max_cells, packet_size, _ = self._params()
-        packets = self._packets(packets, len(rays), params)
+        params = threshold, max_cells, packet_size, large_packet = self._params()
+        n = len(rays)
+        # the pipeline's packets (int32, ending at n) go straight to the kernel, which
+        # checks the rest (from 0, never decreasing); check_packets names what is wrong
+        plain = (large_packet is None and type(packets) is np.ndarray
+                 and packets.dtype == np.int32 and packets.ndim == 1 and len(packets) > 0
+                 and packets.flags.c_contiguous and packets[-1] == n)
+        if not plain:
+            packets = self._packets(packets, n, params)
         bounds = np.asarray(bounds, dtype=np.float32)
         extent = np.ascontiguousarray(bounds[1] - bounds[0], dtype=np.float32)
-        n = len(rays)
         order = np.empty(max(n, 1), dtype=np.int32)
         offsets = np.empty(n + 1, dtype=np.int32)
-        n_sub = isa.module("sorters.nah")._sort(
-            rays.data, packets, extent, threshold, max_cells.bit_length() - 1, packet_size,
-            order, offsets, bucket, cell)
+        try:
+            n_sub = isa.module("sorters.nah")._sort(
+                rays.data, packets, extent, threshold, max_cells.bit_length() - 1,
+                packet_size, order, offsets, bucket, cell)
+        except ValueError:
+            if plain:
+                check_packets(packets, n)
+            raise
         return order[:n], offsets[:n_sub + 1].copy()
 
     def sort(self, rays, packets, bounds):

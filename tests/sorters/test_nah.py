@@ -606,3 +606,42 @@ def test_float_max_cells_is_rejected_or_works(impl):
         return
     rays = one_bucket_rays([[0, 0, 0], [1, 1, 1]])
     check_sort(impl, sorter.sort(rays, np.array([0, 2], np.int32), UNIT), 2, [0, 2])
+
+
+@pytest.mark.parametrize("impl", sorted(IMPLS))
+@pytest.mark.parametrize("packets, message", [
+    ([5, 40, 100], "must start at 0"),
+    ([0, 60, 30, 100], "must not decrease"),
+])
+def test_bad_large_packets_name_the_packets(impl, packets, message):
+    """int32 packets that end at n (the pipeline's kind, which nah hands its kernel
+    unchecked) but start elsewhere or go back: ConfigError saying so."""
+    rays = random_rays(np.random.default_rng(3), 100, UNIT)
+    with pytest.raises(ConfigError, match=message):
+        raysort.create("sorters", impl).sort(rays, np.array(packets, np.int32), UNIT)
+
+
+@pytest.mark.parametrize("impl", sorted(IMPLS))
+def test_strided_packets_sort_as_contiguous_ones(impl):
+    """A strided view of int32 packets sorts as its contiguous copy."""
+    rays = random_rays(np.random.default_rng(4), 300, UNIT)
+    strided = np.array([0, -1, 100, -1, 300], np.int32)[::2]
+    sorter = raysort.create("sorters", impl)
+    for a, b in zip(sorter.sort(rays, strided, UNIT),
+                    sorter.sort(rays, np.ascontiguousarray(strided), UNIT)):
+        assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("impl", sorted(IMPLS))
+def test_parameters_set_after_construction_are_checked_and_used(impl):
+    """A parameter set on the sorter after it was made is checked at the next sort
+    (ConfigError for a bad value) and used (a new packet_size cuts the sub-packets)."""
+    rays = one_bucket_rays([[0, 0, 0]] * 50)
+    packets = np.array([0, 50], np.int32)
+    sorter = raysort.create("sorters", impl)
+    assert np.diff(sorter.sort(rays, packets, UNIT)[1]).max() == 50
+    sorter.packet_size = 7
+    assert np.diff(sorter.sort(rays, packets, UNIT)[1]).max() == 7
+    sorter.max_cells = 3
+    with pytest.raises(ConfigError, match="max_cells"):
+        sorter.sort(rays, packets, UNIT)
