@@ -223,6 +223,7 @@ cdef extern from *:
                                   uint8_t *key) noexcept nogil
     int changes "rs_nah_changes"(const uint8_t *key, int n) noexcept nogil
     uint32_t present_buckets "rs_nah_present"(const uint8_t *key, int n) noexcept nogil
+    int lowest_bit "rs_lowest"(int bits) noexcept nogil
     void run_bounds "rs_nah_run_bounds"(const float *const *o, int start, const uint8_t *key,
                                         int n, float (*lo)[3], float (*hi)[3]) noexcept nogil
     void run_cells "rs_nah_run_cells"(const float *const *o, int start, uint8_t *key, int n,
@@ -332,24 +333,26 @@ cdef int sort_packet(const float[:, ::1] rays, int start, int end, const float *
                 bucket_out[i] = <uint8_t> b
                 cell_out[i] = <uint8_t> k
             key[i - start] = <uint8_t> (b * 8 + k)
-    runs = runs and n >= LONG_RUNS * (changes(key, n) + 1)
+    # (key * 8 keeps the runs: their count changes only where a bucket splits)
+    runs = runs and (split == 0 or n >= LONG_RUNS * (changes(key, n) + 1))
     if runs:
         count_runs(key, n, count)
     else:
         count_keys(key, n, count)
     pos = start
-    for k in range(KEYS):
-        if not present >> (k >> 3) & 1:     # a bucket no ray is in (count 0)
-            continue
-        piece = 0
-        while piece < count[k]:
-            offsets[n_sub] = pos + piece
-            n_sub += 1
-            piece += packet_size
-        a = count[k]
-        count[k] = pos
-        pos += a
-        most = max(most, a)
+    while present:                      # the buckets some ray is in, in order
+        b = lowest_bit(<int> present)
+        present &= present - 1
+        for k in range(b * 8, b * 8 + 8):
+            piece = 0
+            while piece < count[k]:
+                offsets[n_sub] = pos + piece
+                n_sub += 1
+                piece += packet_size
+            a = count[k]
+            count[k] = pos
+            pos += a
+            most = max(most, a)
     # coherent rays: in long runs of one key, or one key holds most of them (see
     # rs_nah_place)
     if runs:
