@@ -3,16 +3,17 @@
  * For the `avx512emu` ISA only (setup.py builds it on request:
  * RAYSORT_BUILD_ISAS=avx512emu): the avx512 build's hand-written 16-lane code
  * (lanes.h, wide16.h) compiled for a CPU without AVX-512, so that the test suite
- * can run it, lane masks, gathers and compression included, where no CPU runs
+ * can run it, lane masks, shuffles and compression included, where no CPU runs
  * AVX-512 (no emulator of ours can run the real instructions: QEMU's cannot).  It
  * is slow and never chosen by default; it tests the code, not the hardware.
  *
  * Each operation follows the Intel SDM's pseudo-code for its instruction, with
  * the same IEEE single-precision operation per lane (the build keeps contraction
  * off): MINPS/MAXPS return the second operand when either is NaN or both are
- * zeros, the _OQ predicates are false on NaN and _NEQ_UQ true, a gather reads
- * base + index * scale bytes, and compression packs the selected lanes at the
- * bottom in lane order and zeroes the rest.  simd.h includes this file after
+ * zeros, the _OQ predicates are false on NaN and _NEQ_UQ true, the shuffles
+ * move lanes within each 128-bit block as the SDM says (VPERMT2PS across the
+ * two sources), and compression packs the selected lanes at the bottom in lane
+ * order and zeroes the rest.  simd.h includes this file after
  * <immintrin.h> and before anything that uses the names, which the macros below
  * then send here.  An aligned load of an address that is not aligned, or a
  * predicate this file does not know, traps (SIGILL), as the instruction would fault.
@@ -156,21 +157,6 @@ RS_EMU rs_emu_m512i rs_emu_mask_blend_epi32(rs_emu_mask16 k, rs_emu_m512i a, rs_
         r.i[j] = (k >> j & 1) ? b.i[j] : a.i[j];
     return r;
 }
-RS_EMU rs_emu_m512i rs_emu_add_epi32(rs_emu_m512i a, rs_emu_m512i b)
-{
-    rs_emu_m512i r;
-    for (int j = 0; j < 16; ++j)
-        r.i[j] = (int32_t)((uint32_t)a.i[j] + (uint32_t)b.i[j]);
-    return r;
-}
-/* the low 32 bits of each product */
-RS_EMU rs_emu_m512i rs_emu_mullo_epi32(rs_emu_m512i a, rs_emu_m512i b)
-{
-    rs_emu_m512i r;
-    for (int j = 0; j < 16; ++j)
-        r.i[j] = (int32_t)((uint32_t)a.i[j] * (uint32_t)b.i[j]);
-    return r;
-}
 /* VPCOMPRESSD with a zero mask: the lanes in k, in order, then zeros */
 RS_EMU rs_emu_m512i rs_emu_maskz_compress_epi32(rs_emu_mask16 k, rs_emu_m512i a)
 {
@@ -181,14 +167,6 @@ RS_EMU rs_emu_m512i rs_emu_maskz_compress_epi32(rs_emu_mask16 k, rs_emu_m512i a)
             r.i[n++] = a.i[j];
     for (; n < 16; ++n)
         r.i[n] = 0;
-    return r;
-}
-/* VGATHERDPS: lane j reads the float at base + index[j] * scale bytes */
-RS_EMU rs_emu_m512 rs_emu_i32gather_ps(rs_emu_m512i index, const void *base, int scale)
-{
-    rs_emu_m512 r;
-    for (int j = 0; j < 16; ++j)
-        memcpy(&r.f[j], (const char *)base + (int64_t)index.i[j] * scale, sizeof(float));
     return r;
 }
 /* VEXTRACTF32X8 and the cast to the low half: lanes 8-15 (imm 1) or 0-7 as an
@@ -204,6 +182,52 @@ RS_EMU rs_emu_m512 rs_emu_broadcast_f32x8(__m256 a)
     rs_emu_m512 r;
     _mm256_storeu_ps(r.f, a);
     _mm256_storeu_ps(r.f + 8, a);
+    return r;
+}
+
+/* VINSERTF32X8 and the cast from the low half: b in lanes 8-15 (imm 1) or 0-7 of a;
+ * a cast leaves lanes 8-15 undefined (zero here) */
+RS_EMU rs_emu_m512 rs_emu_insertf32x8(rs_emu_m512 a, __m256 b, int imm)
+{
+    _mm256_storeu_ps(a.f + (imm & 1) * 8, b);
+    return a;
+}
+RS_EMU rs_emu_m512 rs_emu_castps256_ps512(__m256 a)
+{
+    rs_emu_m512 r = rs_emu_set1_ps(0.0f);
+    _mm256_storeu_ps(r.f, a);
+    return r;
+}
+/* VUNPCKLPS, VUNPCKHPS and VSHUFPS: in each 128-bit block (lanes 4j..4j+3) on
+ * its own, the low (high) two lanes of a and b interleaved; lanes imm[1:0] and
+ * imm[3:2] of a's block, then imm[5:4] and imm[7:6] of b's */
+RS_EMU rs_emu_m512 rs_emu_unpack_ps(rs_emu_m512 a, rs_emu_m512 b, int high)
+{
+    rs_emu_m512 r;
+    for (int j = 0; j < 16; j += 4)
+        for (int k = 0; k < 2; ++k) {
+            r.f[j + 2 * k] = a.f[j + 2 * high + k];
+            r.f[j + 2 * k + 1] = b.f[j + 2 * high + k];
+        }
+    return r;
+}
+RS_EMU rs_emu_m512 rs_emu_shuffle_ps(rs_emu_m512 a, rs_emu_m512 b, int imm)
+{
+    rs_emu_m512 r;
+    for (int j = 0; j < 16; j += 4) {
+        r.f[j] = a.f[j + (imm & 3)];
+        r.f[j + 1] = a.f[j + (imm >> 2 & 3)];
+        r.f[j + 2] = b.f[j + (imm >> 4 & 3)];
+        r.f[j + 3] = b.f[j + (imm >> 6 & 3)];
+    }
+    return r;
+}
+/* VPERMT2PS: lane j is lane idx[j] & 15 of b when bit 4 of idx[j] is set, else of a */
+RS_EMU rs_emu_m512 rs_emu_permutex2var_ps(rs_emu_m512 a, rs_emu_m512i idx, rs_emu_m512 b)
+{
+    rs_emu_m512 r;
+    for (int j = 0; j < 16; ++j)
+        r.f[j] = (idx.i[j] & 16) ? b.f[idx.i[j] & 15] : a.f[idx.i[j] & 15];
     return r;
 }
 
@@ -233,13 +257,16 @@ RS_EMU rs_emu_m512 rs_emu_broadcast_f32x8(__m256 a)
 #define _mm512_movepi32_mask rs_emu_movepi32_mask
 #define _mm512_mask_blend_ps rs_emu_mask_blend_ps
 #define _mm512_mask_blend_epi32 rs_emu_mask_blend_epi32
-#define _mm512_add_epi32 rs_emu_add_epi32
-#define _mm512_mullo_epi32 rs_emu_mullo_epi32
 #define _mm512_cvttps_epi32 rs_emu_cvttps_epi32
 #define _mm512_maskz_compress_epi32 rs_emu_maskz_compress_epi32
-#define _mm512_i32gather_ps rs_emu_i32gather_ps
 #define _mm512_extractf32x8_ps rs_emu_extractf32x8_ps
 #define _mm512_castps512_ps256 rs_emu_castps512_ps256
 #define _mm512_broadcast_f32x8 rs_emu_broadcast_f32x8
+#define _mm512_insertf32x8 rs_emu_insertf32x8
+#define _mm512_castps256_ps512 rs_emu_castps256_ps512
+#define _mm512_unpacklo_ps(a, b) rs_emu_unpack_ps(a, b, 0)
+#define _mm512_unpackhi_ps(a, b) rs_emu_unpack_ps(a, b, 1)
+#define _mm512_shuffle_ps rs_emu_shuffle_ps
+#define _mm512_permutex2var_ps rs_emu_permutex2var_ps
 
 #endif

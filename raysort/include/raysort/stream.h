@@ -14,8 +14,8 @@
  *
  * A stream first copies its rays into records of 64 bytes (rs_stream_ray), and
  * its ids are then indices of records: a group of RS_SW rays loads the eight
- * floats a box test needs with RS_SW row loads and a transpose (sw_rows8;
- * gathers of records with AVX-512) instead of eight gathers from eight rows of
+ * floats a box test needs with RS_SW row loads and a transpose (sw_rows8)
+ * instead of eight gathers from eight rows of
  * rs_rays; the hits go back to the rays when the stream is done.
  *
  * Exactness: each lane performs rs_box1's slab arithmetic on one child box
