@@ -7,8 +7,9 @@ reciprocal directions, as DynBVH's IA test) checks all eight child boxes of a no
 at once, and the children kept are visited nearest first; at a leaf, the chunk's
 rays meet the leaf's box in SIMD groups of rays and each ray that enters it meets
 the leaf's triangle groups as in ``wide8``.  A chunk that is not coherent (fewer
-than 16 active rays, directions that change sign on two axes or more, or spread by
-more than 0.25 in a component) is traced one ray at a time as ``wide8`` does.
+than 16 active rays, directions that change sign on two axes or more or spread by
+more than 0.25 in a component, or origins that spread by more than a tenth of its
+longest ray on an axis) is traced one ray at a time as ``wide8`` does.
 The kernel is ``raysort/include/raysort/frustum.h``.
 """
 from raysort._types cimport rs_node8, rs_tri8, rs_rays, rs_counters
@@ -68,7 +69,8 @@ class FrustumTraversal(Traversal):
     eight triangles at a time, as in ``wide8`` (with AVX-512, two rays per
     16-lane test).  Chunks that are not coherent
     (fewer than 16 active rays, directions that change sign on two axes or more,
-    or whose components spread by more than 0.25) are traced one ray at a time,
+    or whose components spread by more than 0.25, or origins that spread by more
+    than a tenth of the longest ray on an axis) are traced one ray at a time,
     as ``wide8`` does, so
     incoherent rays cost about what ``wide8`` costs.  Exact on every ISA.
 

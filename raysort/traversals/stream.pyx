@@ -133,16 +133,43 @@ cdef _counters(const rs_counters *c, const rs_stream_scratch *w, long long activ
                     stream_level_rays=tuple([w.level_rays[k] for k in range(levels)]))
 
 
+cdef int packet_chunk(const int32_t[::1] starts, const int32_t[::1] counts, int *k,
+                      int *s) noexcept nogil:
+    """The next chunk of the packets, as ``stream_batch.h``'s ``rs_batch_chunk`` cuts it
+    from the batch: the rest of packet ``k`` from lane ``s``, ``RS_FRUSTUM_CHUNK`` lanes
+    at most, then each following packet whole while it fits in the chunk's lanes and
+    starts where the packet before it ends, rounded up to 4 lanes (``_gather.layout``).
+    Returns the lane after the chunk's last ray and moves ``k`` and ``s`` past it."""
+    cdef int n_packets = starts.shape[0], first = s[0], lanes = 0, e = s[0], rest, count
+    while k[0] < n_packets:
+        rest = starts[k[0]] + counts[k[0]] - s[0]
+        count = max(min(rest, RS_FRUSTUM_CHUNK - lanes), 0)
+        if lanes > 0 and (count < rest or starts[k[0]] != first + lanes):
+            break                   # a packet joins a chunk only whole and in its place
+        if count > 0:
+            e = first + lanes + count
+        lanes += (count + 3) & ~3
+        s[0] += count
+        if count < rest:
+            break                   # a full chunk inside a long packet
+        k[0] += 1
+        if k[0] < n_packets:
+            s[0] = starts[k[0]]
+        if lanes >= RS_FRUSTUM_CHUNK:
+            break
+    return e
+
+
 def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream, int width,
           bint frustum=False):
     """Trace ``packets`` with this ISA build of the kernel (called through raysort.isa);
-    with ``frustum`` (8-wide tree only) coherent chunks of a sub-packet take the
+    with ``frustum`` (8-wide tree only) coherent chunks (:func:`packet_chunk`) take the
     ``frustum`` traversal's walk and only the others join the streams."""
     check_stream("trace", stream_size, order)
     check_packet_layout(packets)
     cdef const int32_t[::1] starts = packets.starts, counts = packets.counts
     cdef int n_packets = starts.shape[0]
-    cdef int k, i, m, size, s, e
+    cdef int k, i, m, size, s, e, first
     cdef rs_frustum_bounds bounds
     cdef rs_frustum_entry *chunk_stack = NULL
     cdef long long active = 0
@@ -176,26 +203,25 @@ def trace(bvh, packets, bint any_hit, int stream_size, int order, int min_stream
                 raise MemoryError()
         with nogil:
             m = 0
-            for k in range(n_packets):
-                s = starts[k]
-                while s < starts[k] + counts[k]:
-                    e = min(s + RS_FRUSTUM_CHUNK, starts[k] + counts[k])
-                    if frustum and starts[k] % 4 == 0 \
-                            and rs_frustum_bounds_of(&rays, s, e, &bounds) \
-                            and rs_frustum_coherent(&bounds):
-                        rs_frustum_walk(<const rs_node8 *> tree, <const rs_tri8 *> leaves,
-                                        &rays, s, e, any_hit, &bounds, chunk_stack, &c)
-                        s = e
-                        continue
-                    for i in range(s, e):
-                        if rays.tmin[i] < rays.t[i]:
-                            w.ids[m] = i
-                            m += 1
-                            if m == size:
-                                rs_stream_trace(width, tree, leaves, &rays, m, any_hit, order,
-                                                min_stream, &w, &c)
-                                m = 0
-                    s = e
+            k = 0
+            s = starts[0]
+            while k < n_packets:
+                first = s
+                e = packet_chunk(starts, counts, &k, &s)
+                if frustum and first % 4 == 0 \
+                        and rs_frustum_bounds_of(&rays, first, e, &bounds) \
+                        and rs_frustum_coherent(&bounds):
+                    rs_frustum_walk(<const rs_node8 *> tree, <const rs_tri8 *> leaves,
+                                    &rays, first, e, any_hit, &bounds, chunk_stack, &c)
+                    continue
+                for i in range(first, e):
+                    if rays.tmin[i] < rays.t[i]:
+                        w.ids[m] = i
+                        m += 1
+                        if m == size:
+                            rs_stream_trace(width, tree, leaves, &rays, m, any_hit, order,
+                                            min_stream, &w, &c)
+                            m = 0
             if m:
                 rs_stream_trace(width, tree, leaves, &rays, m, any_hit, order, min_stream, &w, &c)
         counters = _counters(&c, &w, active)
@@ -327,9 +353,10 @@ class StreamTraversal(Traversal):
                                      4-wide one (``BVH.wide``), slower with
                                      every SIMD ISA on every scene measured
                                      (BENCHMARKS.md §7)
-    frustum      bool    True        coherent chunks of 64 rays of a
-                                     sub-packet (camera rays, shadow rays
-                                     to one light) take the ``frustum``
+    frustum      bool    True        coherent chunks of up to 64 rays
+                                     (a long sub-packet cut, short ones
+                                     together; camera rays, shadow rays to
+                                     one light) take the ``frustum``
                                      traversal's walk, only the others
                                      form streams (8-wide tree only)
     ===========  ======  ==========  ========================================

@@ -2,7 +2,8 @@
 
 Hits are compared with brute force (``raysort.reference``) on every ISA this CPU
 runs, for the rays the frustum path is for (camera rays from one point, parallel
-rays, rays with a zero direction component, rays from spread origins), with ties,
+rays, rays with a zero direction component, rays from spread origins, shadow rays
+from origins close together and far apart), with ties,
 zero-area triangles, inactive lanes and short sub-packets; incoherent chunks must
 take the single-ray path, whose hits and counters are ``wide8``'s.  (The
 conformance suite holds ``frustum`` to the full contract on the active ISA.)
@@ -135,6 +136,41 @@ def test_incoherent_chunks_trace_one_ray_at_a_time_as_wide8(soup_bvh, rng):
     _, wide8 = trace(bvh, rays, size=64, name="wide8")
     assert counters.ia == 0
     assert (counters.box4, counters.tri4) == (wide8.box4, wide8.tri4)
+
+
+@pytest.mark.parametrize("spread, walked", [(0.02, True), (0.16, False)])
+def test_chunks_whose_origins_spread_wide_trace_one_ray_at_a_time(each_isa, soup_bvh, spread,
+                                                                  walked):
+    """Shadow rays toward one light, their directions within the walk's spread: from
+    origins close together (2 % of the ray length) a chunk takes the walk; from origins
+    spread wider than a tenth of the longest ray (the hits of a bounce) it goes one ray
+    at a time, as ``wide8`` (the walk's interval test would cull almost nothing).
+    Brute force's hits either way."""
+    V, F, bvh = soup_bvh
+    rng = np.random.default_rng(11)
+    light = np.array([25.0, 30.0, 25.0])
+    centre = np.array([8.0, 5.0, 8.0])
+    length = np.linalg.norm(light - centre)
+    origins = centre + rng.uniform(-0.5, 0.5, (640, 3)) * spread * length
+    d = light - origins
+    dist = np.linalg.norm(d, axis=1)
+    d /= dist[:, None]
+    chunks = d.reshape(-1, 64, 3)
+    assert (chunks.max(axis=1) - chunks.min(axis=1)).max() <= 0.25    # directions agree
+    assert (d > 0).all()
+    rays = batch(origins, d, 1e-3, dist.astype(F32))
+    ref = brute_force(V, F, rays)
+    assert 0 < (ref.prim >= 0).sum() < len(rays)
+    for any_hit in (False, True):
+        hits, counters = trace(bvh, rays, any_hit=any_hit, size=64)
+        if any_hit:
+            assert np.array_equal(hits, ref.prim >= 0)
+        else:
+            assert_same_hits(hits, ref, f"{each_isa} spread {spread}")
+        assert (counters.ia > 0) == walked
+        if not walked:
+            _, wide8 = trace(bvh, rays, any_hit=any_hit, size=64, name="wide8")
+            assert (counters.box4, counters.tri4) == (wide8.box4, wide8.tri4)
 
 
 def test_camera_chunks_test_fewer_boxes_than_wide8(soup_bvh):

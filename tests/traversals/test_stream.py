@@ -172,9 +172,9 @@ def test_reading_the_batch_takes_the_frustum_walk_as_the_packets(each_isa, siben
 
 @pytest.mark.parametrize("frustum", [True, False])
 def test_reading_the_batch_in_short_sub_packets_as_the_packets(each_isa, sibenik, frustum):
-    """Camera rays in sub-packets of 1 to 100 rays, most shorter than a chunk (the scratch
-    is filled only as far as a sub-packet's rays; one under RS_FRUSTUM_MIN_RAYS skips its
-    bounds): brute force's hits and the packet path's counters, some chunks walked."""
+    """Camera rays in sub-packets of 1 to 100 rays, most shorter than a chunk (those that
+    fit share one, each at the next multiple of 4 lanes, as the gather lays them out):
+    brute force's hits and the packet path's counters, some chunks walked."""
     rays = camera_rays(sibenik, 64, 64)[0].rays
     ref = brute_force(sibenik.vertices, sibenik.faces, rays)
     sizes = np.resize([1, 3, 15, 16, 17, 33, 63, 64, 65, 100], len(rays))
@@ -187,6 +187,24 @@ def test_reading_the_batch_in_short_sub_packets_as_the_packets(each_isa, sibenik
     assert counters == expected
     assert counters.rays == len(rays)
     assert (counters.ia > 0) == frustum
+
+
+@pytest.mark.parametrize("size", [1, 4, 6, 13])
+def test_short_sub_packets_share_a_chunk_and_its_walk(each_isa, sibenik, size):
+    """Camera rays cut into sub-packets too short for the walk on their own (a sorter's
+    small cells): consecutive ones share a chunk of up to 64 lanes, which takes the
+    frustum walk on both paths (N_IA > 0), with brute force's hits and, read from the
+    batch, the packet path's counters."""
+    rays = camera_rays(sibenik, 64, 64)[0].rays
+    ref = brute_force(sibenik.vertices, sibenik.faces, rays)
+    offsets = np.append(np.arange(0, len(rays), size), len(rays)).astype(np.int32)
+    order = np.arange(len(rays), dtype=np.int32)
+    hits, expected = trace(sibenik.bvh(), rays, order, offsets, frustum=True)
+    assert_same_hits(hits, ref, f"{each_isa} packets of {size}")
+    hits, counters, _ = trace_batch(sibenik.bvh(), rays, order, offsets, frustum=True)
+    assert_same_hits(hits, ref, f"{each_isa} batch in sub-packets of {size}")
+    assert counters == expected
+    assert counters.ia > 0
 
 
 def test_reading_the_batch_traces_invalid_rays_as_misses(each_isa, soup):
@@ -375,9 +393,8 @@ def test_dense_blocks_of_a_chunk_keep_brute_forces_hits(each_isa, sibenik, kind)
     the lamp (any hit and closest hit), and camera rays of which every third is invalid
     (tmin > tmax), so that blocks hold lanes that do not look, whose hits must stay
     misses.  Every ray keeps brute force's hit, and the chunks take the walk."""
-    if kind == "shadow":
-        work = workload(sibenik, "shadow", width=64, height=64, seed=3)
-        rays = work.rays
+    if kind == "shadow":        # the first 4096 of a 256x256 render's (close origins)
+        rays = workload(sibenik, "shadow", width=256, height=256, seed=3).rays.truncate(4096)
     else:
         rays = camera_rays(sibenik, 64, 64)[0].rays
         rays.tmin[::3] = 2.0

@@ -4,8 +4,8 @@
  * and its scatter copies their hits back to batch order.  A stream makes its
  * own copy of every ray (its 64-byte records) and writes every hit back, so for
  * `stream` both are a second copy of the same data.  rs_stream_batch reads
- * the batch's ray rows in the sorter's order instead: each chunk of
- * RS_FRUSTUM_CHUNK rays of a sub-packet is gathered into a scratch of that many
+ * the batch's ray rows in the sorter's order instead: each chunk of up to
+ * RS_FRUSTUM_CHUNK lanes (rs_batch_chunk) is gathered into a scratch of that many
  * lanes (rs_gather_block: the gather's rules and arithmetic per lane, so the
  * same values), a coherent chunk takes the frustum walk there, the others'
  * active rays become stream records, and hits go from the scratch or the
@@ -122,6 +122,47 @@ RS_INLINE void rs_batch_stream(const int width, const void *tree, const void *le
     }
 }
 
+/* The next chunk of the sorter's result: the rest of sub-packet *k from ray
+ * position *s, RS_FRUSTUM_CHUNK rays at most, then each following sub-packet
+ * before k1 whole while its rays fit in the chunk's lanes.  The lanes are those
+ * of the packet layout (_gather.layout: each sub-packet at the next multiple of
+ * 4 lanes, the lanes between empty), so the packet path (stream.pyx's trace)
+ * cuts the same chunks from gathered packets.  Writes ids[0, RS_FRUSTUM_CHUNK)
+ * (-1: an empty lane), sets *bad if an entry of the order is not a ray of
+ * [0, n_src) (checked without a branch per ray), returns the lanes up to the
+ * chunk's last ray, and moves *k and *s past the chunk. */
+RS_INLINE int rs_batch_chunk(const int32_t *order, const int32_t *offsets, int k1,
+                             int64_t n_src, int *k, int64_t *s, int32_t *ids, int *bad)
+{
+    int lanes = 0, n = 0, out = 0;
+    for (int j = 0; j < RS_FRUSTUM_CHUNK; ++j)
+        ids[j] = -1;
+    while (*k < k1) {
+        const int64_t rest = offsets[*k + 1] - *s;
+        const int room = RS_FRUSTUM_CHUNK - lanes;
+        const int count = rest < room ? (int)(rest > 0 ? rest : 0) : room;
+        if (lanes > 0 && count < rest)
+            break;                          /* a sub-packet joins a chunk only whole */
+        for (int j = 0; j < count; ++j) {
+            const int32_t id = order[*s + j];
+            out |= (uint32_t)id >= (uint64_t)n_src;
+            ids[lanes + j] = id;
+        }
+        if (count > 0)
+            n = lanes + count;
+        lanes += (count + 3) & ~3;
+        *s += count;
+        if (count < rest)
+            break;                          /* a full chunk inside a long sub-packet */
+        if (++*k < k1)
+            *s = offsets[*k];
+        if (lanes >= RS_FRUSTUM_CHUNK)
+            break;
+    }
+    *bad = out;
+    return n;
+}
+
 /* Sub-packets k0 <= k < k1 of the sorter's result (rays order[offsets[k],
  * offsets[k + 1]) of the batch's ray rows src, n_src rays each) through the
  * tree, in streams of up to w->size rays; every ray's hit goes to out.  With
@@ -157,28 +198,26 @@ static rs_batch_status rs_stream_batch(const int width, const void *tree, const 
     chunk.prim = prim;
     chunk.u = u;
     chunk.v = v;
-    for (int k = k0; k < k1; ++k) {
-        for (int64_t s = offsets[k]; s < offsets[k + 1]; s += RS_FRUSTUM_CHUNK) {
-            const int n = (int)(offsets[k + 1] - s < RS_FRUSTUM_CHUNK ? offsets[k + 1] - s
-                                                                       : RS_FRUSTUM_CHUNK);
+    int k = k0;
+    int64_t s = k0 < k1 ? offsets[k0] : 0;
+    while (k < k1) {
+        {       /* a chunk */
+            const int64_t first = s;
+            int bad;
+            const int n = rs_batch_chunk(order, offsets, k1, n_src, &k, &s, ids, &bad);
             /* the rows RS_GATHER_AHEAD rays on (as rs_gather_lanes) */
             for (int q = 0; q < n; q += 16) {
-                int64_t r = s + q + RS_GATHER_AHEAD < n_src ? s + q + RS_GATHER_AHEAD : n_src - 1;
+                int64_t r = first + q + RS_GATHER_AHEAD < n_src ? first + q + RS_GATHER_AHEAD
+                                                                : n_src - 1;
                 for (int a = 0; a < RS_RAY_ROWS; ++a)
                     rs_prefetch(src[a] + r);
             }
-            /* the chunk's ids (-1 past n), checked without a branch per ray; `run`:
-             * whether they are consecutive (the `none` sorter's), as the hits'
-             * rows can then be written a vector at a time */
-            int bad = 0, run = 1;
-            for (int j = 0; j < n; ++j) {
-                int32_t id = order[s + j];
-                bad |= (uint32_t)id >= (uint64_t)n_src;
-                run &= id == (int64_t)order[s] + j;
-                ids[j] = id;
-            }
-            for (int j = n; j < RS_FRUSTUM_CHUNK; ++j)
-                ids[j] = -1;
+            /* `run`: whether the ids are consecutive (the `none` sorter's, no empty
+             * lane among them), as the hits' rows can then be written a vector at a
+             * time */
+            int run = 1;
+            for (int j = 0; j < n; ++j)
+                run &= ids[j] == (int64_t)ids[0] + j;
             if (bad) {
                 status.order_bad = 1;
                 return status;
@@ -194,15 +233,17 @@ static rs_batch_status rs_stream_batch(const int width, const void *tree, const 
                 memcpy(t0, chunk.t, sizeof t0);
                 rs_frustum_walk((const rs_node8 *)tree, (const rs_tri8 *)leaves, &chunk, 0, n,
                                 any_hit, &b, stack, c);
-                int first = run && !out->occluded ? rs_batch_put_run(&chunk, n, ids[0], t0,
-                                                                     n_prim, out) : 0;
-                for (int j = first; j < n; ++j)
-                    if (rs_batch_put(&chunk, j, ids[j], t0[j], n_prim, out)
+                int done = run && !out->occluded ? rs_batch_put_run(&chunk, n, ids[0], t0,
+                                                                    n_prim, out) : 0;
+                for (int j = done; j < n; ++j)
+                    if (ids[j] >= 0 && rs_batch_put(&chunk, j, ids[j], t0[j], n_prim, out)
                             && status.bad_hit < 0)
                         status.bad_hit = ids[j];
                 continue;
             }
             for (int j = 0; j < n; ++j) {
+                if (ids[j] < 0)                         /* an empty lane */
+                    continue;
                 if (!(chunk.tmin[j] < chunk.t[j])) {    /* not traced: a miss */
                     rs_batch_put(&chunk, j, ids[j], chunk.t[j], n_prim, out);
                     continue;
