@@ -45,6 +45,24 @@ RS_INLINE int rs_lowest(int bits)
  * operations are those of simd.h's 4-lane vocabulary, with the same operand
  * semantics (min/max return the second operand when either is NaN; != is true
  * for NaN). */
+/* The first two steps of an 8x8 transpose of eight rows r[0..7] (8 floats in each
+ * 256-bit half: pfx _mm256, or _mm512 for two at once), through t, into s: within
+ * each 128-bit block, s[c] then holds float c of rows 0-3 and s[c + 4] of rows 4-7
+ * (floats c + 4 in the block above); sw_rows8 finishes it across the blocks. */
+#define RS_TRANSPOSE8_IN_LANES(pfx, r, t, s)                                               \
+    do {                                                                                \
+        for (int k_ = 0; k_ < 8; k_ += 2) {                                             \
+            t[k_] = pfx##_unpacklo_ps(r[k_], r[k_ + 1]);                                \
+            t[k_ + 1] = pfx##_unpackhi_ps(r[k_], r[k_ + 1]);                            \
+        }                                                                               \
+        for (int k_ = 0; k_ < 8; k_ += 4) {                                             \
+            s[k_] = pfx##_shuffle_ps(t[k_], t[k_ + 2], _MM_SHUFFLE(1, 0, 1, 0));        \
+            s[k_ + 1] = pfx##_shuffle_ps(t[k_], t[k_ + 2], _MM_SHUFFLE(3, 2, 3, 2));    \
+            s[k_ + 2] = pfx##_shuffle_ps(t[k_ + 1], t[k_ + 3], _MM_SHUFFLE(1, 0, 1, 0)); \
+            s[k_ + 3] = pfx##_shuffle_ps(t[k_ + 1], t[k_ + 3], _MM_SHUFFLE(3, 2, 3, 2)); \
+        }                                                                               \
+    } while (0)
+
 #if RS_ISA_AVX512
 #  define RS_SW 16
 typedef __m512 rs_swf;
@@ -106,16 +124,7 @@ RS_INLINE void sw_rows8(const float *base, int stride, rs_swi id, rs_swf out[8])
         r[k] = _mm512_insertf32x8(
             _mm512_castps256_ps512(_mm256_loadu_ps(base + (size_t)stride * i[k])),
             _mm256_loadu_ps(base + (size_t)stride * i[k + 8]), 1);
-    for (int k = 0; k < 8; k += 2) {    /* the 8x8 transpose of each half */
-        t[k] = _mm512_unpacklo_ps(r[k], r[k + 1]);
-        t[k + 1] = _mm512_unpackhi_ps(r[k], r[k + 1]);
-    }
-    for (int k = 0; k < 8; k += 4) {
-        s[k] = _mm512_shuffle_ps(t[k], t[k + 2], _MM_SHUFFLE(1, 0, 1, 0));
-        s[k + 1] = _mm512_shuffle_ps(t[k], t[k + 2], _MM_SHUFFLE(3, 2, 3, 2));
-        s[k + 2] = _mm512_shuffle_ps(t[k + 1], t[k + 3], _MM_SHUFFLE(1, 0, 1, 0));
-        s[k + 3] = _mm512_shuffle_ps(t[k + 1], t[k + 3], _MM_SHUFFLE(3, 2, 3, 2));
-    }
+    RS_TRANSPOSE8_IN_LANES(_mm512, r, t, s);   /* the 8x8 transpose of each half */
     const __m512i lo = _mm512_loadu_si512((const void *)rs_rows8_lo);
     const __m512i hi = _mm512_loadu_si512((const void *)rs_rows8_hi);
     for (int c = 0; c < 4; ++c) {
@@ -189,16 +198,7 @@ RS_INLINE void sw_rows8(const float *base, int stride, rs_swi id, rs_swf out[8])
     _mm256_storeu_si256((__m256i *)i, id);
     for (int k = 0; k < 8; ++k)
         r[k] = _mm256_loadu_ps(base + (size_t)stride * i[k]);
-    for (int k = 0; k < 8; k += 2) {       /* an 8x8 transpose */
-        t[k] = _mm256_unpacklo_ps(r[k], r[k + 1]);
-        t[k + 1] = _mm256_unpackhi_ps(r[k], r[k + 1]);
-    }
-    for (int k = 0; k < 8; k += 4) {
-        s[k] = _mm256_shuffle_ps(t[k], t[k + 2], _MM_SHUFFLE(1, 0, 1, 0));
-        s[k + 1] = _mm256_shuffle_ps(t[k], t[k + 2], _MM_SHUFFLE(3, 2, 3, 2));
-        s[k + 2] = _mm256_shuffle_ps(t[k + 1], t[k + 3], _MM_SHUFFLE(1, 0, 1, 0));
-        s[k + 3] = _mm256_shuffle_ps(t[k + 1], t[k + 3], _MM_SHUFFLE(3, 2, 3, 2));
-    }
+    RS_TRANSPOSE8_IN_LANES(_mm256, r, t, s);   /* an 8x8 transpose */
     for (int c = 0; c < 4; ++c) {
         out[c] = _mm256_permute2f128_ps(s[c], s[c + 4], 0x20);
         out[c + 4] = _mm256_permute2f128_ps(s[c], s[c + 4], 0x31);
