@@ -70,7 +70,7 @@ typedef __mmask16 rs_swm;
 typedef __m512i rs_swi;
 RS_INLINE rs_swi sw_ids(const int32_t *p) { return _mm512_loadu_si512((const void *)p); }
 /* Sixteen scalar loads, not vgatherdps (as AVX2's, below): on Zen 5 the gather of
- * Sibenik's 65,536 nah-sorted diffuse rays took 0.84x the time (BENCHMARKS.md §9). */
+ * Sibenik's 65,536 nah-sorted diffuse rays took 0.85x the time (BENCHMARKS.md §9). */
 RS_INLINE rs_swf sw_gather(const float *base, rs_swi id)
 {
     int32_t i[16];
@@ -109,8 +109,9 @@ RS_INLINE void sw_store(float *p, rs_swf a) { _mm512_storeu_ps(p, a); }
 RS_INLINE void sw_storei(int32_t *p, rs_swi a) { _mm512_storeu_si512((void *)p, a); }
 RS_INLINE rs_swi sw_asi(rs_swf a) { return _mm512_castps_si512(a); }
 /* sw_rows8: sixteen 8-float loads and a transpose, not eight 16-lane gathers: on
- * Zen 5, stream traced first-bounce diffuse rays 1.20x as fast and lambert shaded
- * in 0.86x the time; on a Sapphire Rapids Xeon the two were even (§9). */
+ * Zen 5, stream traced first-bounce diffuse rays 1.17-1.21x as fast and lambert
+ * shaded in 0.86x the time; on a Sapphire Rapids Xeon, stream 0.99x and lambert
+ * 1.025x the time (BENCHMARKS.md §8, §9). */
 /* the last step of sw_rows8's transpose: lanes 0-3 and 8-11 (rs_rows8_lo), or
  * 4-7 and 12-15, of two vectors, a block of four from each in turn */
 static const int32_t rs_rows8_lo[16] = {0, 1, 2, 3, 16, 17, 18, 19, 8, 9, 10, 11, 24, 25, 26, 27};

@@ -200,61 +200,59 @@ static rs_batch_status rs_stream_batch(const int width, const void *tree, const 
     chunk.v = v;
     int k = k0;
     int64_t s = k0 < k1 ? offsets[k0] : 0;
-    while (k < k1) {
-        {       /* a chunk */
-            const int64_t first = s;
-            int bad;
-            const int n = rs_batch_chunk(order, offsets, k1, n_src, &k, &s, ids, &bad);
-            /* the rows RS_GATHER_AHEAD rays on (as rs_gather_lanes) */
-            for (int q = 0; q < n; q += 16) {
-                int64_t r = first + q + RS_GATHER_AHEAD < n_src ? first + q + RS_GATHER_AHEAD
-                                                                : n_src - 1;
-                for (int a = 0; a < RS_RAY_ROWS; ++a)
-                    rs_prefetch(src[a] + r);
-            }
-            /* `run`: whether the ids are consecutive (the `none` sorter's, no empty
-             * lane among them), as the hits' rows can then be written a vector at a
-             * time */
-            int run = 1;
-            for (int j = 0; j < n; ++j)
-                run &= ids[j] == (int64_t)ids[0] + j;
-            if (bad) {
-                status.order_bad = 1;
-                return status;
-            }
-            for (int j = 0; j < RS_FRUSTUM_CHUNK; j += RS_SW) {
-                int bits = rs_gather_block(dst, prim, u, v, NULL, src, ids, j);
-                if (bits && status.bad_ray < 0)
-                    status.bad_ray = ids[j + rs_lowest(bits)];
-            }
-            const int active = rs_frustum_bounds_of(&chunk, 0, n, &b);
-            status.active += active;
-            if (frustum && active && rs_frustum_coherent(&b)) {
-                memcpy(t0, chunk.t, sizeof t0);
-                rs_frustum_walk((const rs_node8 *)tree, (const rs_tri8 *)leaves, &chunk, 0, n,
-                                any_hit, &b, stack, c);
-                int done = run && !out->occluded ? rs_batch_put_run(&chunk, n, ids[0], t0,
-                                                                    n_prim, out) : 0;
-                for (int j = done; j < n; ++j)
-                    if (ids[j] >= 0 && rs_batch_put(&chunk, j, ids[j], t0[j], n_prim, out)
-                            && status.bad_hit < 0)
-                        status.bad_hit = ids[j];
+    while (k < k1) {       /* a chunk at a time */
+        const int64_t first = s;
+        int bad;
+        const int n = rs_batch_chunk(order, offsets, k1, n_src, &k, &s, ids, &bad);
+        /* the rows RS_GATHER_AHEAD rays on (as rs_gather_lanes) */
+        for (int q = 0; q < n; q += 16) {
+            int64_t r = first + q + RS_GATHER_AHEAD < n_src ? first + q + RS_GATHER_AHEAD
+                                                            : n_src - 1;
+            for (int a = 0; a < RS_RAY_ROWS; ++a)
+                rs_prefetch(src[a] + r);
+        }
+        /* `run`: whether the ids are consecutive (the `none` sorter's, no empty
+         * lane among them), as the hits' rows can then be written a vector at a
+         * time */
+        int run = 1;
+        for (int j = 0; j < n; ++j)
+            run &= ids[j] == (int64_t)ids[0] + j;
+        if (bad) {
+            status.order_bad = 1;
+            return status;
+        }
+        for (int j = 0; j < RS_FRUSTUM_CHUNK; j += RS_SW) {
+            int bits = rs_gather_block(dst, prim, u, v, NULL, src, ids, j);
+            if (bits && status.bad_ray < 0)
+                status.bad_ray = ids[j + rs_lowest(bits)];
+        }
+        const int active = rs_frustum_bounds_of(&chunk, 0, n, &b);
+        status.active += active;
+        if (frustum && active && rs_frustum_coherent(&b)) {
+            memcpy(t0, chunk.t, sizeof t0);
+            rs_frustum_walk((const rs_node8 *)tree, (const rs_tri8 *)leaves, &chunk, 0, n,
+                            any_hit, &b, stack, c);
+            int done = run && !out->occluded ? rs_batch_put_run(&chunk, n, ids[0], t0,
+                                                                n_prim, out) : 0;
+            for (int j = done; j < n; ++j)
+                if (ids[j] >= 0 && rs_batch_put(&chunk, j, ids[j], t0[j], n_prim, out)
+                        && status.bad_hit < 0)
+                    status.bad_hit = ids[j];
+            continue;
+        }
+        for (int j = 0; j < n; ++j) {
+            if (ids[j] < 0)                         /* an empty lane */
+                continue;
+            if (!(chunk.tmin[j] < chunk.t[j])) {    /* not traced: a miss */
+                rs_batch_put(&chunk, j, ids[j], chunk.t[j], n_prim, out);
                 continue;
             }
-            for (int j = 0; j < n; ++j) {
-                if (ids[j] < 0)                         /* an empty lane */
-                    continue;
-                if (!(chunk.tmin[j] < chunk.t[j])) {    /* not traced: a miss */
-                    rs_batch_put(&chunk, j, ids[j], chunk.t[j], n_prim, out);
-                    continue;
-                }
-                rs_stream_record(&chunk, j, ids[j], &w->rec[m]);   /* prim -1, u, v 0 */
-                w->ids[m] = m;
-                if (++m == w->size) {
-                    rs_batch_stream(width, tree, leaves, m, any_hit, order_kind, min_stream,
-                                    n_prim, w, out, c, &status);
-                    m = 0;
-                }
+            rs_stream_record(&chunk, j, ids[j], &w->rec[m]);   /* prim -1, u, v 0 */
+            w->ids[m] = m;
+            if (++m == w->size) {
+                rs_batch_stream(width, tree, leaves, m, any_hit, order_kind, min_stream,
+                                n_prim, w, out, c, &status);
+                m = 0;
             }
         }
     }
