@@ -97,6 +97,21 @@ cdef inline int32_t checked_ray(int32_t j, int32_t lo, int32_t hi, int32_t n, ui
     return j if inside else -1
 
 
+cdef inline int rays_bad(const int32_t *order, Py_ssize_t a, Py_ssize_t b, int32_t lo,
+                         int32_t hi, uint8_t *seen) noexcept nogil:
+    """Any of ``order[a:b]`` outside ``[lo, hi)`` or seen before (``seen``: a byte per
+    ray, set here).  The range first (:func:`range_bad`, a loop the compiler
+    vectorises), then a load and a store per ray, rays known to be inside."""
+    cdef Py_ssize_t i
+    cdef int bad = 0
+    if range_bad(order, a, b, lo, hi):
+        return 1
+    for i in range(a, b):
+        bad |= seen[order[i]]
+        seen[order[i]] = 1
+    return bad
+
+
 cdef inline int sub_packet_bad(const int32_t *order, Py_ssize_t a, Py_ssize_t b,
                                const int32_t *packets, Py_ssize_t n_big, int32_t n,
                                Py_ssize_t *k_big, uint8_t *seen) noexcept nogil:

@@ -16,7 +16,7 @@ from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t, uint64_t
 from libc.stdlib cimport calloc, free
 from libc.string cimport memcmp, memset
 from raysort._checks cimport (ray_bad, closest_bad, any_hit_bad, large_packet,
-                              packet_bounds, slot_bad, sub_packet_bad, nonfinite,
+                              packet_bounds, slot_bad, sub_packet_bad, rays_bad, nonfinite,
                               parents_weights_bad, slots_bad)
 from raysort._types cimport (RS_RAY_OX, RS_RAY_OY, RS_RAY_OZ, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ,
                              RS_RAY_TMIN, RS_RAY_TMAX, RS_RAY_ROWS, RS_PACKET_ROWS,
@@ -86,6 +86,33 @@ cdef int is_identity(const int32_t *order, int32_t n) noexcept nogil:
     return 1
 
 
+cdef int runs_bad(const int32_t *order, const int32_t *offsets, Py_ssize_t n_sub,
+                  const int32_t *packets, Py_ssize_t n_big, int32_t n, int64_t max_packet,
+                  uint8_t *seen) noexcept nogil:
+    """Non-zero if the sort result (offsets from 0 to n) breaks its contract, checked a
+    run of sub-packets at a time: consecutive sub-packets whose first rays lie in one
+    large packet form a run, whose rays must all lie in that packet and each be seen
+    for the first time, the rules of :func:`sub_packet_bad` for each of its sub-packets
+    (each starts in the run's packet).  One loop per large packet, as sorters cut them,
+    instead of one per sub-packet; :func:`sort_kernel` says what is wrong."""
+    cdef Py_ssize_t k, k_big = 0, run = 0
+    cdef int64_t a, b
+    cdef int32_t lo = 0, hi = 0, first
+    for k in range(n_sub):
+        a, b = offsets[k], offsets[k + 1]
+        if b <= a or b > n or b - a > max_packet:
+            return 1
+        first = order[a]            # (a < b <= n: a ray of the order)
+        if k > 0 and lo <= first < hi:
+            continue                # the run goes on
+        if k > 0 and rays_bad(order, run, a, lo, hi, seen):
+            return 1
+        if packet_bounds(first, packets, n_big, n, &k_big, &lo, &hi):
+            return 1
+        run = a
+    return rays_bad(order, run, n, lo, hi, seen) if n_sub > 0 else 0
+
+
 cdef int sort_kernel(const int32_t *order, const int32_t *offsets, Py_ssize_t n_sub,
                      const int32_t *packets, Py_ssize_t n_big, int32_t n, int64_t max_packet,
                      bint known_identity, uint8_t *seen, Py_ssize_t *where) noexcept nogil:
@@ -98,6 +125,10 @@ cdef int sort_kernel(const int32_t *order, const int32_t *offsets, Py_ssize_t n_
         return BAD_OFFSETS_START
     if offsets[n_sub] != n:
         return BAD_OFFSETS_END
+    if not identity:
+        if not runs_bad(order, offsets, n_sub, packets, n_big, n, max_packet, seen):
+            return 0
+        memset(seen, 0, n + 1)      # found bad: sub-packet by sub-packet, what and where
     for k in range(n_sub):
         where[0] = k
         a, b = offsets[k], offsets[k + 1]

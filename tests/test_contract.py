@@ -155,6 +155,68 @@ def test_sub_packet_mixing_large_packets(order, offsets, packets):
             n=len(order), match="large packets")
 
 
+def _contract_holds(order, offsets, packets, n):
+    """The sort contract rule by rule in NumPy, independent of the check kernels."""
+    sizes = np.diff(offsets)
+    if len(offsets) < 1 or offsets[0] != 0 or offsets[-1] != n or np.any(sizes <= 0) \
+            or np.any(sizes > MAX_PACKET):
+        return False
+    if not np.array_equal(np.sort(order), np.arange(n)):
+        return False
+    packet_of = np.searchsorted(packets, order, side="right") - 1
+    return all(np.all(packet_of[a:b] == packet_of[a]) for a, b in zip(offsets[:-1], offsets[1:]))
+
+
+def _random_result(rng, n, packets):
+    """A valid order: each large packet's rays shuffled and cut into sub-packets, the
+    sub-packets of all packets in a random order (the contract allows them interleaved)."""
+    pieces = []
+    for a, b in zip(packets[:-1], packets[1:]):
+        rays = rng.permutation(np.arange(a, b, dtype=np.int32))
+        cuts = np.sort(rng.choice(np.arange(1, max(b - a, 1)), size=min(b - a - 1, rng.integers(
+            0, 6)), replace=False)) if b - a > 1 else []
+        pieces += [p for p in np.split(rays, cuts) if len(p)]
+    pieces = [pieces[i] for i in rng.permutation(len(pieces))] if rng.random() < 0.5 else pieces
+    order = np.concatenate(pieces) if pieces else np.zeros(0, np.int32)
+    return order.astype(np.int32), np.cumsum([0] + [len(p) for p in pieces]).astype(np.int32)
+
+
+def test_check_agrees_with_the_contract_on_random_results(each_isa):
+    """Random valid results (sub-packets of a large packet in a row, or interleaved with
+    other packets') pass, and each of their mutations passes exactly when the NumPy
+    statement of the contract holds: a ray moved into another sub-packet, a ray repeated,
+    an offset moved, two sub-packets joined.  The check reads a large packet's run of
+    sub-packets in one loop; the mutations break runs in every place."""
+    rng = np.random.default_rng(7)
+    verdicts = set()
+    for _ in range(400):
+        n = int(rng.integers(1, 200))
+        inner = np.sort(rng.choice(np.arange(1, n), size=min(n - 1, int(rng.integers(0, 5))),
+                                   replace=False)) if n > 1 else []
+        packets = np.concatenate([[0], inner, [n]]).astype(np.int32)
+        order, offsets = _random_result(rng, n, packets)
+        check_sort(NAME, (order, offsets), n, packets)
+        mutation = rng.integers(4)
+        order, offsets = order.copy(), offsets.copy()
+        i, j = rng.integers(n, size=2)
+        if mutation == 0:
+            order[i], order[j] = order[j], order[i]
+        elif mutation == 1:
+            order[i] = order[j]
+        elif mutation == 2 and len(offsets) > 2:
+            k = rng.integers(1, len(offsets) - 1)
+            offsets[k] += rng.choice([-1, 1])
+        elif len(offsets) > 2:
+            offsets = np.delete(offsets, rng.integers(1, len(offsets) - 1))
+        holds = _contract_holds(order, offsets, packets, n)
+        verdicts.add(holds)
+        if holds:
+            check_sort(NAME, (order, offsets), n, packets)
+        else:
+            rejects((order, offsets), n=n, packets=packets)
+    assert verdicts == {True, False}
+
+
 # -- the framework runs the check -----------------------------------------------------------
 
 class BrokenSorter(raysort.Sorter):
