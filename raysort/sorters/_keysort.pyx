@@ -83,6 +83,7 @@ cdef enum:
     COUNT_SIZE = 8 << MAX_DIGIT         # histogram ints: 64 bits take at most 8 digits
 cdef enum:
     BLOCK = 256             # rays whose coordinates are computed together, loop by loop
+    IOTA_SPILL = 7          # values rs_keysort_iota may write past its end
 #: widest and narrowest radix digit (bits)
 MAX_DIGIT_BITS = MAX_DIGIT
 MIN_DIGIT_BITS = MIN_DIGIT
@@ -95,11 +96,17 @@ cdef extern from *:
     #include "raysort/simd.h"
     /* c ? a : b, as a select the compiler vectorises (a Cython conditional is a branch) */
     static inline float rs_keysort_pick(int c, float a, float b) { return c ? a : b; }
-    /* out[j] = 1 / sqrt(x[j]), eight at a time with AVX2, four with SSE: a loop of sqrtf
-     * calls does not vectorise (errno), and SQRTPS rounds exactly as sqrtf does */
+    /* out[j] = 1 / sqrt(x[j]), sixteen at a time with AVX-512, eight with AVX2, four
+     * with SSE: a loop of sqrtf calls does not vectorise (errno), and SQRTPS rounds
+     * exactly as sqrtf does */
     static inline void rs_keysort_inv_sqrt(const float *x, float *out, int m)
     {
         int j = 0;
+    #if RS_ISA_AVX512
+        for (; j + 16 <= m; j += 16)
+            _mm512_storeu_ps(out + j, _mm512_div_ps(_mm512_set1_ps(1.0f),
+                                                    _mm512_sqrt_ps(_mm512_loadu_ps(x + j))));
+    #endif
     #if RS_ISA_AVX2
         for (; j + 8 <= m; j += 8)
             _mm256_storeu_ps(out + j, _mm256_div_ps(_mm256_set1_ps(1.0f),
@@ -295,6 +302,26 @@ cdef extern from *:
         for (int i = 0; i < n; i += 16)
             rs_prefetchw(out + i);
     }
+    /* out[0, len) = first, first + 1, ...: a decompressed chunk's rays.  Chunks are
+     * short (a few rays), so with AVX2 (and AVX-512) whole vectors of eight, which may
+     * write up to IOTA_SPILL values past len (the caller leaves room), four with SSE;
+     * no loop tail to mispredict. */
+    static inline void rs_keysort_iota(int32_t *out, int32_t first, int len)
+    {
+    #if RS_ISA_AVX2
+        const __m256i step = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        for (int k = 0; k < len; k += 8)
+            _mm256_storeu_si256((__m256i *)(out + k),
+                                _mm256_add_epi32(_mm256_set1_epi32(first + k), step));
+    #elif RS_SSE
+        const __m128i step = _mm_setr_epi32(0, 1, 2, 3);
+        for (int k = 0; k < len; k += 4)
+            _mm_storeu_si128((__m128i *)(out + k), _mm_add_epi32(_mm_set1_epi32(first + k), step));
+    #else
+        for (int k = 0; k < len; ++k)
+            out[k] = first + k;
+    #endif
+    }
     /* out[i] = start + (k32[i] & idx): the rays of sorted compact keys (restrict: a
      * loop the compiler vectorises) */
     static inline void rs_keysort_ray_order(const uint32_t *RS_RESTRICT k32, int n,
@@ -332,6 +359,7 @@ cdef extern from *:
     void prefetch_out "rs_keysort_prefetch_out"(int32_t *out, int n) noexcept nogil
     int ctz64 "rs_keysort_ctz64"(uint64_t x) noexcept nogil
     int popcount64 "rs_keysort_popcount64"(uint64_t x) noexcept nogil
+    void iota "rs_keysort_iota"(int32_t *out, int32_t first, int len) noexcept nogil
     void ray_order "rs_keysort_ray_order"(const uint32_t *k32, int n, uint32_t idx,
                                           int32_t start, int32_t *out) noexcept nogil
     void end_points "rs_keysort_end_points"(const float *const *o, const float *const *d,
@@ -800,7 +828,9 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     order[start:end]; write sub-packet starts to offsets and return their number.
     Work buffers hold end - start (+1) items, ``count`` :data:`COUNT_SIZE` ints."""
     cdef int i, j, c, nc = 0, flip, low_bit, width, passes, buckets, shift1, shift2
+    cdef int descents
     cdef uint64_t mask, low, key, all_and, all_or, dmask
+    cdef int32_t *out
     cdef int32_t *h1
     cdef int32_t *h2
     # a chunk is every ray, or (compress) every run of equal keys in input order
@@ -813,28 +843,27 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     mask = (~(<uint64_t> 0) << (64 - bits)) if bits < 64 else ~(<uint64_t> 0)
     low = ~mask
     cdef bint simple, library = LIBRARY_SORT and packed
-    # the bits that differ between keys: only those are sorted on; and the runs of
-    # equal keys: compression pays only when they are long (the order is the same)
+    # the bits that differ between keys: only those are sorted on; the runs of equal
+    # keys: compression pays only when they are long (the order is the same); and
+    # whether the sorted bits ever descend (one loop the compiler vectorises)
     all_and, all_or = keys[0], keys[0]
     c = 1
+    descents = 0
     for i in range(1, n):
         all_and &= keys[i]
         all_or |= keys[i]
         c += keys[i] != keys[i - 1]
+        descents |= (keys[i] & mask) < (keys[i - 1] & mask)
     compress = compress and 2 * c <= n
-    if not compress:
+    if not compress and not descents:
         # already in order (coherent rays often are: camera rays in their tile's Morton
-        # order)?  Then the stable sort leaves every ray where it is.  (A loop that stops
-        # at the first descent, which a packet not in order mostly shows early; not
-        # where long runs of equal keys make the compressed sort cheap anyway.)
-        i = 1
-        while i < n and (keys[i] & mask) >= (keys[i - 1] & mask):
-            i += 1
-        if i >= n:
-            for i in range(n):
-                order[start + i] = start + i
-            return cut_packets(keys, n, start, packet_size, split_bits, split_bits <= bits,
-                               offsets)
+        # order): the stable sort leaves every ray where it is.  (Not where long runs of
+        # equal keys make the compressed sort cheap anyway.)
+        out = order + start
+        for i in range(n):
+            out[i] = start + i
+        return cut_packets(keys, n, start, packet_size, split_bits, split_bits <= bits,
+                           offsets)
     simple = packed and not compress
     if simple and COMPACT_SORT:
         c = sort_compact(keys, n, start, (all_and ^ all_or) & mask, split_bits,
@@ -985,9 +1014,20 @@ cdef int make_chunks(const uint64_t *keys, int start, int end, bint compress, bi
     chunk nc <= ray i is written after ray i is read."""
     cdef int i, nc = 0
     cdef uint64_t key, prev = 0
+    if not compress:
+        for i in range(end - start):
+            key = keys[i]
+            if packed:
+                ckey[i] = (key & mask) | <uint64_t> i
+            else:
+                ckey[i] = key
+                citem[i] = i
+            cstart[i] = start + i
+        cstart[end - start] = end
+        return end - start
     for i in range(end - start):
         key = keys[i]
-        if not compress or i == 0 or key != prev:
+        if i == 0 or key != prev:
             if packed:
                 ckey[nc] = (key & mask) | <uint64_t> nc
             else:
@@ -1012,11 +1052,16 @@ cdef int finish_packet(const uint64_t *sk, const int32_t *si, int nc, int n, int
         pos = start
         for j in range(nc):
             c = <int> (sk[j] & low) if packed else si[j]
-            for i in range(cstart[c], cstart[c + 1]):
-                order[pos] = i
-                skey[pos - start] = sk[j]
-                pos += 1
-        sk = skey
+            iota(order + pos, cstart[c], cstart[c + 1] - cstart[c])
+            pos += cstart[c + 1] - cstart[c]
+        if split_bits:      # (cut_packets reads the keys only to cut at their top bits)
+            pos = 0
+            for j in range(nc):
+                c = <int> (sk[j] & low) if packed else si[j]
+                for i in range(pos, pos + cstart[c + 1] - cstart[c]):
+                    skey[i] = sk[j]
+                pos += cstart[c + 1] - cstart[c]
+            sk = skey
     else:
         for j in range(nc):
             order[start + j] = start + si[j]
@@ -1085,7 +1130,7 @@ cdef object sort_packets(const KeyInputs *a, const uint64_t *keys, const int32_t
         if packets[p + 1] < packets[p]:
             raise ValueError(f"large packet {p} ends before it starts")
         widest = max(widest, packets[p + 1] - packets[p])
-    order = np.empty(max(n, 1), dtype=np.int32)
+    order = np.empty(n + IOTA_SPILL + 1, dtype=np.int32)     # (room for iota past the end)
     offsets = np.empty(n + 1, dtype=np.int32)
     cdef int32_t[::1] order_mv = order, offsets_mv = offsets
     cdef uint64_t[::1] ckey = np.empty(widest, np.uint64), ckey_tmp = np.empty(widest, np.uint64)

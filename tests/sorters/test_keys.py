@@ -243,6 +243,32 @@ def test_sort_keys_is_a_stable_sort(rng, each_isa, compress, digits, packet_size
                                                      split_bits))
 
 
+@pytest.mark.parametrize("compress", [False, True])
+@pytest.mark.parametrize("digits", [1, 3])
+def test_packets_already_in_order(rng, each_isa, compress, digits):
+    """Packets whose sorted bits never descend keep their order without a sort (found in
+    the pass that also finds the bits that vary); one descent anywhere, even at the last
+    ray or the first, sorts them.  Low bits below the sorted ones may descend freely."""
+    size = 700
+    top = np.sort(rng.integers(0, 256 ** digits, size=size, dtype=np.uint64))
+    ascending = top << np.uint64(64 - 8 * digits)
+    low = rng.integers(0, 2 ** (64 - 8 * digits), size=size, dtype=np.uint64)
+    last_descends = ascending.copy()
+    last_descends[-1] = ascending[0] if ascending[-1] != ascending[0] else np.uint64(0)
+    first_descends = ascending.copy()
+    first_descends[0] = ascending[-1] | np.uint64(1 << (64 - 8 * digits))
+    equal = np.full(size, ascending[size // 2])
+    blocks = [ascending, ascending | low, last_descends, first_descends, equal]
+    keys = np.concatenate(blocks)
+    packets = np.arange(0, len(keys) + 1, size, dtype=np.int32)
+    order, offsets = isa.module("sorters._keysort").sort_keys(
+        keys, packets, digits, compress=compress, packet_size=64, split_bits=0)
+    assert np.array_equal(order, reference_order(keys, packets, digits))
+    assert np.array_equal(offsets, reference_offsets(keys[order], packets, 64, 0))
+    for p in (0, 1, 4):     # kept in input order
+        assert np.array_equal(order[p * size:(p + 1) * size], np.arange(p * size, (p + 1) * size))
+
+
 def test_which_builds_sort_with_numpy(each_isa):
     """The avx2 and avx512 builds sort 32-bit compact keys with NumPy's sort, the
     avx512 builds also 64-bit packed keys; the rest is the radix sort (the tests of

@@ -21,6 +21,7 @@
 #ifndef RAYSORT_AVX512_EMU_H
 #define RAYSORT_AVX512_EMU_H
 
+#include <math.h>
 #include <stdint.h>
 #include <string.h>
 
@@ -222,6 +223,15 @@ RS_EMU rs_emu_m512 rs_emu_shuffle_ps(rs_emu_m512 a, rs_emu_m512 b, int imm)
     }
     return r;
 }
+/* VSQRTPS: each lane's correctly rounded square root, as sqrtf (and SQRTPS) gives it */
+RS_EMU rs_emu_m512 rs_emu_sqrt_ps(rs_emu_m512 a)
+{
+    rs_emu_m512 r;
+    for (int j = 0; j < 16; ++j)
+        r.f[j] = sqrtf(a.f[j]);
+    return r;
+}
+
 /* VPERMT2PS: lane j is lane idx[j] & 15 of b when bit 4 of idx[j] is set, else of a */
 RS_EMU rs_emu_m512 rs_emu_permutex2var_ps(rs_emu_m512 a, rs_emu_m512i idx, rs_emu_m512 b)
 {
@@ -241,6 +251,7 @@ RS_EMU rs_emu_m512 rs_emu_permutex2var_ps(rs_emu_m512 a, rs_emu_m512i idx, rs_em
 #define _mm512_sub_ps rs_emu_sub_ps
 #define _mm512_mul_ps rs_emu_mul_ps
 #define _mm512_div_ps rs_emu_div_ps
+#define _mm512_sqrt_ps rs_emu_sqrt_ps
 #define _mm512_min_ps rs_emu_min_ps
 #define _mm512_max_ps rs_emu_max_ps
 #define _mm512_set1_ps rs_emu_set1_ps
