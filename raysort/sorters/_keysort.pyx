@@ -1014,20 +1014,9 @@ cdef int make_chunks(const uint64_t *keys, int start, int end, bint compress, bi
     chunk nc <= ray i is written after ray i is read."""
     cdef int i, nc = 0
     cdef uint64_t key, prev = 0
-    if not compress:
-        for i in range(end - start):
-            key = keys[i]
-            if packed:
-                ckey[i] = (key & mask) | <uint64_t> i
-            else:
-                ckey[i] = key
-                citem[i] = i
-            cstart[i] = start + i
-        cstart[end - start] = end
-        return end - start
     for i in range(end - start):
         key = keys[i]
-        if i == 0 or key != prev:
+        if not compress or i == 0 or key != prev:
             if packed:
                 ckey[nc] = (key & mask) | <uint64_t> nc
             else:
