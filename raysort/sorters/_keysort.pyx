@@ -302,10 +302,10 @@ cdef extern from *:
         for (int i = 0; i < n; i += 16)
             rs_prefetchw(out + i);
     }
-    /* out[0, len) = first, first + 1, ...: a decompressed chunk's rays.  Chunks are
-     * short (a few rays), so with AVX2 (and AVX-512) whole vectors of eight, which may
-     * write up to IOTA_SPILL values past len (the caller leaves room), four with SSE;
-     * no loop tail to mispredict. */
+    /* out[0, len) = first, first + 1, ...: a packet kept in order, or a decompressed
+     * chunk's rays.  Chunks are short (a few rays), so with AVX2 (and AVX-512) whole
+     * vectors of eight, which may write up to IOTA_SPILL values past len (the order
+     * has room for them past its end), four with SSE; no loop tail to mispredict. */
     static inline void rs_keysort_iota(int32_t *out, int32_t first, int len)
     {
     #if RS_ISA_AVX2
@@ -830,7 +830,6 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     cdef int i, j, c, nc = 0, flip, low_bit, width, passes, buckets, shift1, shift2
     cdef int descents
     cdef uint64_t mask, low, key, all_and, all_or, dmask
-    cdef int32_t *out
     cdef int32_t *h1
     cdef int32_t *h2
     # a chunk is every ray, or (compress) every run of equal keys in input order
@@ -859,9 +858,7 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
         # already in order (coherent rays often are: camera rays in their tile's Morton
         # order): the stable sort leaves every ray where it is.  (Not where long runs of
         # equal keys make the compressed sort cheap anyway.)
-        out = order + start
-        for i in range(n):
-            out[i] = start + i
+        iota(order + start, start, n)
         return cut_packets(keys, n, start, packet_size, split_bits, split_bits <= bits,
                            offsets)
     simple = packed and not compress

@@ -256,7 +256,7 @@ def test_packets_already_in_order(rng, each_isa, compress, digits):
     last_descends = ascending.copy()
     last_descends[-1] = ascending[0] if ascending[-1] != ascending[0] else np.uint64(0)
     first_descends = ascending.copy()
-    first_descends[0] = ascending[-1] | np.uint64(1 << (64 - 8 * digits))
+    first_descends[0] = np.uint64((256 ** digits - 1) << (64 - 8 * digits))     # the largest
     equal = np.full(size, ascending[size // 2])
     blocks = [ascending, ascending | low, last_descends, first_descends, equal]
     keys = np.concatenate(blocks)
