@@ -16,8 +16,8 @@ from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t, uint64_t
 from libc.stdlib cimport calloc, free
 from libc.string cimport memcmp, memset
 from raysort._checks cimport (ray_bad, closest_bad, any_hit_bad, large_packet,
-                              packet_bounds, slot_bad, sub_packet_bad, rays_bad, nonfinite,
-                              parents_weights_bad, slots_bad)
+                              packet_bounds, slot_bad, sub_packet_bad, rays_bad, offsets_bad,
+                              nonfinite, parents_weights_bad, slots_bad)
 from raysort._types cimport (RS_RAY_OX, RS_RAY_OY, RS_RAY_OZ, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ,
                              RS_RAY_TMIN, RS_RAY_TMAX, RS_RAY_ROWS, RS_PACKET_ROWS,
                              RS_PACKET_TMIN, RS_PACKET_T)
@@ -96,13 +96,14 @@ cdef int runs_bad(const int32_t *order, const int32_t *offsets, Py_ssize_t n_sub
     (each starts in the run's packet).  One loop per large packet, as sorters cut them,
     instead of one per sub-packet; :func:`sort_kernel` says what is wrong."""
     cdef Py_ssize_t k, k_big = 0, run = 0
-    cdef int64_t a, b
+    cdef int64_t a
     cdef int32_t lo = 0, hi = 0, first
+    # (no sub-packet is longer than n: max_packet capped there fits offsets_bad's int32)
+    if offsets_bad(offsets, n_sub, n, <int32_t> min(max_packet, <int64_t> n)):
+        return 1
     for k in range(n_sub):
-        a, b = offsets[k], offsets[k + 1]
-        if b <= a or b > n or b - a > max_packet:
-            return 1
-        first = order[a]            # (a < b <= n: a ray of the order)
+        a = offsets[k]
+        first = order[a]            # (offsets ascend from 0 to n: a ray of the order)
         if k > 0 and lo <= first < hi:
             continue                # the run goes on
         if k > 0 and rays_bad(order, run, a, lo, hi, seen):
