@@ -168,6 +168,41 @@ def test_short_keys_are_the_table_lookups(mode, rng):
         assert np.array_equal(got, apply_table(table, q)), name
 
 
+def lookup_tables(rng):
+    """short_tables and, for the builds that assemble keys in vector registers: keys that
+    read both nibbles of a coordinate's high byte (six lookups, and eight), and one too
+    long for the key's high 32 bits (which those builds leave to the scalar lookups)."""
+    yield from short_tables(rng)
+    yield "eight-bits", _keysort.key_table([(0, 1, 2)] * 8)[0]
+    yield "eight-lookups", _keysort.key_table([(0, 1, 2, 3)] * 7)[0]
+    yield "36-bits", _keysort.key_table([(0, 1, 2, 3, 4, 5)] * 6)[0]
+
+
+@pytest.mark.parametrize("octant", [False, True])
+@pytest.mark.parametrize("n", [1, 7, 9, 16, 1500])
+@pytest.mark.parametrize("mode", ["components", "octahedral", "end_point"])
+def test_keys_on_every_isa(mode, n, octant, rng, each_isa):
+    """Every build's keys (on AVX-512 assembled sixteen at a time from nibble tables,
+    with a masked last vector) are the OR of the table's rows at the quantised
+    coordinates, with the octant's signs on top."""
+    rays = inside_rays(rng, n)
+    n_coords = 5 if mode == "octahedral" else 6
+    q = np.zeros((6, n), np.int64)
+    for k in range(n_coords):
+        q[k] = quantised(mode, rays, BOX, k, length=2.5)
+    signs = sum((rays.directions[k] < 0).astype(np.uint64) << np.uint64(63 - k)
+                for k in range(3))
+    for name, table in lookup_tables(rng):
+        table = table.copy()
+        table[n_coords:] = 0
+        want = apply_table(table, q)
+        if octant:
+            want = want >> np.uint64(3) | signs
+        got = isa.module("sorters._keysort").make_keys(rays, mode, BOX, table, length=2.5,
+                                                       octant=octant)
+        assert np.array_equal(got, want), name
+
+
 @pytest.mark.parametrize("prev", [None, "some"], ids=["fixed-length", "prev_t"])
 def test_end_point_coordinates(prev, rng):
     rays = inside_rays(rng, 2000)

@@ -241,6 +241,53 @@ RS_EMU rs_emu_m512 rs_emu_permutex2var_ps(rs_emu_m512 a, rs_emu_m512i idx, rs_em
     return r;
 }
 
+/* VPERMD: lane j is lane idx[j] & 15 of a */
+RS_EMU rs_emu_m512i rs_emu_permutexvar_epi32(rs_emu_m512i idx, rs_emu_m512i a)
+{
+    rs_emu_m512i r;
+    for (int j = 0; j < 16; ++j)
+        r.i[j] = a.i[idx.i[j] & 15];
+    return r;
+}
+/* VPERMT2D: lane j is lane idx[j] & 15 of b when bit 4 of idx[j] is set, else of a */
+RS_EMU rs_emu_m512i rs_emu_permutex2var_epi32(rs_emu_m512i a, rs_emu_m512i idx, rs_emu_m512i b)
+{
+    rs_emu_m512i r;
+    for (int j = 0; j < 16; ++j)
+        r.i[j] = (idx.i[j] & 16) ? b.i[idx.i[j] & 15] : a.i[idx.i[j] & 15];
+    return r;
+}
+/* VPSRLVD by each lane's count (zeros past 31) and VPORD */
+RS_EMU rs_emu_m512i rs_emu_srlv_epi32(rs_emu_m512i a, rs_emu_m512i count)
+{
+    rs_emu_m512i r;
+    for (int j = 0; j < 16; ++j)
+        r.i[j] = (uint32_t)count.i[j] > 31 ? 0 : (int32_t)((uint32_t)a.i[j] >> count.i[j]);
+    return r;
+}
+RS_EMU rs_emu_m512i rs_emu_or_si512(rs_emu_m512i a, rs_emu_m512i b)
+{
+    rs_emu_m512i r;
+    for (int j = 0; j < 16; ++j)
+        r.i[j] = a.i[j] | b.i[j];
+    return r;
+}
+/* VMOVUPS with a zero mask and VMOVDQU32 with a mask: the lanes outside k are not
+ * read (zero) or not written, so neither touches memory past them */
+RS_EMU rs_emu_m512 rs_emu_maskz_loadu_ps(rs_emu_mask16 k, const void *p)
+{
+    rs_emu_m512 r;
+    for (int j = 0; j < 16; ++j)
+        r.f[j] = (k >> j & 1) ? ((const float *)p)[j] : 0.0f;
+    return r;
+}
+RS_EMU void rs_emu_mask_storeu_epi32(void *p, rs_emu_mask16 k, rs_emu_m512i a)
+{
+    for (int j = 0; j < 16; ++j)
+        if (k >> j & 1)
+            memcpy((char *)p + 4 * j, &a.i[j], 4);
+}
+
 #undef RS_EMU
 
 /* the names the avx512 code is written with, sent here */
@@ -279,5 +326,11 @@ RS_EMU rs_emu_m512 rs_emu_permutex2var_ps(rs_emu_m512 a, rs_emu_m512i idx, rs_em
 #define _mm512_unpackhi_ps(a, b) rs_emu_unpack_ps(a, b, 1)
 #define _mm512_shuffle_ps rs_emu_shuffle_ps
 #define _mm512_permutex2var_ps rs_emu_permutex2var_ps
+#define _mm512_permutexvar_epi32 rs_emu_permutexvar_epi32
+#define _mm512_permutex2var_epi32 rs_emu_permutex2var_epi32
+#define _mm512_srlv_epi32 rs_emu_srlv_epi32
+#define _mm512_or_si512 rs_emu_or_si512
+#define _mm512_maskz_loadu_ps rs_emu_maskz_loadu_ps
+#define _mm512_mask_storeu_epi32 rs_emu_mask_storeu_epi32
 
 #endif
