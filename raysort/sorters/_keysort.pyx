@@ -331,25 +331,25 @@ cdef extern from *:
         for (int i = 0; i < n; ++i)
             out[i] = start + (int32_t)(k32[i] & idx);
     }
-    /* Keys of m rays assembled in vector registers (AVX-512 only; RS_KEYSORT_NIBBLES):
-     * for a short key whose table rows are each the OR of a lookup per nibble of the
-     * coordinate's high byte and whose bits all lie in the key's high 32 bits (after
-     * the octant's shift), the high half of the key is the OR over those nibbles of a
-     * 16-entry table indexed by the nibble, which VPERMD looks up for sixteen rays at
-     * once (the scalar path reads three 256-entry pair tables per ray).  Table t, its
-     * entries at tables[16 * t], serves coordinate c[coord[t] * stride + j], quantised
-     * as rs_keysort_quantise does, >> shift[t] (12 or 8: VPERMD reads the low four
-     * bits); n_tables is 6 or 12 (unused tables are zero), so that the loop over them
-     * unrolls with every table in a register.  With octant, bits 31, 30, 29 are the
-     * signs of dx, dy, dz.  The keys are the scalar path's, bit for bit (plan_nibbles
-     * checks the rows). */
-    #define RS_KEYSORT_NIBBLES RS_ISA_AVX512
+    /* Keys of m rays assembled in vector registers (AVX-512 only; RS_KEYSORT_WINDOWS):
+     * for a short key whose table rows are each the OR of a lookup on the top five
+     * bits of the coordinate's high byte and one on its low three, and whose bits all
+     * lie in the key's high 32 bits (after the octant's shift), the high half of the
+     * key is the OR over those windows of a 32-entry table indexed by the window's
+     * bits, which VPERMT2D looks up for sixteen rays at once (the scalar path reads
+     * three 256-entry pair tables per ray).  Table t, its entries at tables[32 * t],
+     * serves coordinate c[coord[t] * stride + j], quantised as rs_keysort_quantise
+     * does, >> shift[t] (11 or 8: VPERMT2D reads the low five bits); n_tables is 6 or
+     * 12 (unused tables are zero), so that the loop over them unrolls with every table
+     * in registers.  With octant, bits 31, 30, 29 are the signs of dx, dy, dz.  The
+     * keys are the scalar path's, bit for bit (plan_windows checks the rows). */
+    #define RS_KEYSORT_WINDOWS RS_ISA_AVX512
     #define RS_KEYSORT_TABLE_SLOTS 6
     #if RS_ISA_AVX512
     static const int32_t rs_keysort_widen[2][16] = {
         {0, 16, 0, 17, 0, 18, 0, 19, 0, 20, 0, 21, 0, 22, 0, 23},
         {0, 24, 0, 25, 0, 26, 0, 27, 0, 28, 0, 29, 0, 30, 0, 31}};
-    RS_INLINE void rs_keysort_nibble_keys_n(const int n_tables, const float *c, int stride,
+    RS_INLINE void rs_keysort_window_keys_n(const int n_tables, const float *c, int stride,
                                             int m, const int *coord, const int *shift,
                                             const uint32_t *tables, const float *dx,
                                             const float *dy, const float *dz, int octant,
@@ -360,10 +360,12 @@ cdef extern from *:
         const __m512i none = _mm512_set1_epi32(0),
                       lo = _mm512_loadu_si512(rs_keysort_widen[0]),
                       hi = _mm512_loadu_si512(rs_keysort_widen[1]);
-        __m512i tab[2 * RS_KEYSORT_TABLE_SLOTS], count[2 * RS_KEYSORT_TABLE_SLOTS];
+        __m512i low[2 * RS_KEYSORT_TABLE_SLOTS], high[2 * RS_KEYSORT_TABLE_SLOTS],
+                count[2 * RS_KEYSORT_TABLE_SLOTS];
         const float *row[2 * RS_KEYSORT_TABLE_SLOTS];
         for (int t = 0; t < n_tables; ++t) {
-            tab[t] = _mm512_loadu_si512(tables + 16 * t);
+            low[t] = _mm512_loadu_si512(tables + 32 * t);
+            high[t] = _mm512_loadu_si512(tables + 32 * t + 16);
             count[t] = _mm512_set1_epi32(shift[t]);
             row[t] = c + coord[t] * stride;
         }
@@ -375,8 +377,8 @@ cdef extern from *:
                 __m512 x = _mm512_maskz_loadu_ps(k, row[t] + j);
                 __m512i q = _mm512_cvttps_epi32(_mm512_mul_ps(
                     _mm512_min_ps(_mm512_max_ps(x, zero), one), qmax));
-                h = _mm512_or_si512(h, _mm512_permutexvar_epi32(_mm512_srlv_epi32(q, count[t]),
-                                                                tab[t]));
+                h = _mm512_or_si512(h, _mm512_permutex2var_epi32(
+                    low[t], _mm512_srlv_epi32(q, count[t]), high[t]));
             }
             if (octant) {
                 __mmask16 sx = _mm512_cmp_ps_mask(_mm512_maskz_loadu_ps(k, dx + j), zero,
@@ -406,21 +408,21 @@ cdef extern from *:
             }
         }
     }
-    static void rs_keysort_nibble_keys(const float *c, int stride, int m, int n_tables,
+    static void rs_keysort_window_keys(const float *c, int stride, int m, int n_tables,
                                        const int *coord, const int *shift,
                                        const uint32_t *tables, const float *dx,
                                        const float *dy, const float *dz, int octant,
                                        uint64_t *keys)
     {
         if (n_tables == RS_KEYSORT_TABLE_SLOTS)
-            rs_keysort_nibble_keys_n(RS_KEYSORT_TABLE_SLOTS, c, stride, m, coord, shift,
+            rs_keysort_window_keys_n(RS_KEYSORT_TABLE_SLOTS, c, stride, m, coord, shift,
                                      tables, dx, dy, dz, octant, keys);
         else
-            rs_keysort_nibble_keys_n(2 * RS_KEYSORT_TABLE_SLOTS, c, stride, m, coord, shift,
+            rs_keysort_window_keys_n(2 * RS_KEYSORT_TABLE_SLOTS, c, stride, m, coord, shift,
                                      tables, dx, dy, dz, octant, keys);
     }
     #else
-    static void rs_keysort_nibble_keys(const float *c, int stride, int m, int n_tables,
+    static void rs_keysort_window_keys(const float *c, int stride, int m, int n_tables,
                                        const int *coord, const int *shift,
                                        const uint32_t *tables, const float *dx,
                                        const float *dy, const float *dz, int octant,
@@ -461,9 +463,9 @@ cdef extern from *:
     void iota "rs_keysort_iota"(int32_t *out, int32_t first, int len) noexcept nogil
     void ray_order "rs_keysort_ray_order"(const uint32_t *k32, int n, uint32_t idx,
                                           int32_t start, int32_t *out) noexcept nogil
-    bint NIBBLES "RS_KEYSORT_NIBBLES"
+    bint WINDOWS "RS_KEYSORT_WINDOWS"
     int TABLE_SLOTS "RS_KEYSORT_TABLE_SLOTS"
-    void nibble_keys "rs_keysort_nibble_keys"(const float *c, int stride, int m, int n_tables,
+    void window_keys "rs_keysort_window_keys"(const float *c, int stride, int m, int n_tables,
                                               const int *coord, const int *shift,
                                               const uint32_t *tables, const float *dx,
                                               const float *dy, const float *dz, bint octant,
@@ -533,14 +535,14 @@ cdef struct KeyInputs:
     int shift_second[KEY_COORDS]
     int width_second[KEY_COORDS]
     uint64_t pairs[KEY_COORDS][TABLE_ROW]
-    # or, where the build and the table allow (see plan_nibbles), the high half of the
-    # key as the OR of n_nibbles 16-entry tables, table t indexed by a nibble of
-    # coordinate nib_coord[t]'s high byte (its quantised value >> nib_shift[t])
-    bint nibbles
-    int n_nibbles
-    int nib_coord[2 * KEY_COORDS]
-    int nib_shift[2 * KEY_COORDS]
-    uint32_t nib_tables[2 * KEY_COORDS * 16]
+    # or, where the build and the table allow (see plan_windows), the high half of the
+    # key as the OR of n_windows 32-entry tables, table t indexed by a window of bits of
+    # coordinate win_coord[t]'s high byte (its quantised value >> win_shift[t])
+    bint windows
+    int n_windows
+    int win_coord[2 * KEY_COORDS]
+    int win_shift[2 * KEY_COORDS]
+    uint32_t win_tables[2 * KEY_COORDS * 32]
 
 
 cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept nogil:
@@ -659,47 +661,47 @@ cdef void plan_lookups(KeyInputs *a, int n_coords) noexcept nogil:
 assert TABLE_SLOTS == KEY_COORDS
 
 
-cdef void plan_nibbles(KeyInputs *a, int n_coords) noexcept nogil:
-    """Set ``a.nibbles`` where the vectorised lookups give the keys of the scalar path
-    (rs_keysort_nibble_keys): on a build that has them, for a short key whose table
-    rows are each the OR of their entries for the high byte's two nibbles (as every
-    interleave is: each coordinate bit sets its own key bit) and whose bits all lie in
-    the key's high 32 bits after the octant's shift."""
-    cdef int k, x, v, n = 0, out_shift = 35 if a.octant else 32
+cdef void plan_windows(KeyInputs *a, int n_coords) noexcept nogil:
+    """Set ``a.windows`` where the vectorised lookups give the keys of the scalar path
+    (rs_keysort_window_keys): on a build that has them, for a short key whose table
+    rows are each the OR of their entries for the high byte's top five bits and its
+    low three (as every interleave is: each coordinate bit sets its own key bit) and
+    whose bits all lie in the key's high 32 bits after the octant's shift."""
+    cdef int k, x, i, n = 0, out_shift = 35 if a.octant else 32
     cdef uint64_t low = (<uint64_t> 1 << out_shift) - 1
     cdef const uint64_t *row
     cdef uint64_t every
     cdef bint lower
-    a.nibbles = False
-    if not NIBBLES or a.low_bytes:
+    a.windows = False
+    if not WINDOWS or a.low_bytes:
         return
     for k in range(n_coords):
         row = a.table + (2 * k + 1) * TABLE_ROW
         lower, every = False, 0
         for x in range(TABLE_ROW):
-            if row[x] != (row[x & 0xF0] | row[x & 0x0F]) or row[x] & low:
+            if row[x] != (row[x & 0xF8] | row[x & 0x07]) or row[x] & low:
                 return
-            lower |= row[x & 0x0F] != row[0]
+            lower |= row[x & 0x07] != row[0]
             every |= row[x]
         if every == 0:                  # the key draws nothing from this coordinate
             continue
-        for v in range(16):
-            a.nib_tables[16 * n + v] = <uint32_t> (row[v << 4] >> out_shift)
-        a.nib_coord[n], a.nib_shift[n] = k, 12
+        for i in range(32):
+            a.win_tables[32 * n + i] = <uint32_t> (row[(i << 3) & 0xFF] >> out_shift)
+        a.win_coord[n], a.win_shift[n] = k, 11
         n += 1
-        if lower:                       # the low nibble matters too
-            for v in range(16):
-                a.nib_tables[16 * n + v] = <uint32_t> (row[v] >> out_shift)
-            a.nib_coord[n], a.nib_shift[n] = k, 8
+        if lower:                       # the low three bits matter too
+            for i in range(32):
+                a.win_tables[32 * n + i] = <uint32_t> (row[i & 0x07] >> out_shift)
+            a.win_coord[n], a.win_shift[n] = k, 8
             n += 1
     # unused tables (zero, of coordinate 0) up to TABLE_SLOTS or twice that: the loop over
     # them is unrolled
-    a.n_nibbles = TABLE_SLOTS if n <= TABLE_SLOTS else 2 * TABLE_SLOTS
-    for n in range(n, a.n_nibbles):
-        for v in range(16):
-            a.nib_tables[16 * n + v] = 0
-        a.nib_coord[n], a.nib_shift[n] = 0, 12
-    a.nibbles = True
+    a.n_windows = TABLE_SLOTS if n <= TABLE_SLOTS else 2 * TABLE_SLOTS
+    for n in range(n, a.n_windows):
+        for i in range(32):
+            a.win_tables[32 * n + i] = 0
+        a.win_coord[n], a.win_shift[n] = 0, 11
+    a.windows = True
 
 
 cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcept nogil:
@@ -729,8 +731,8 @@ cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcep
     while b < start + n:
         m = min(<int> BLOCK, start + n - b)
         block_coordinates(a, b, m, c)
-        if a.nibbles:
-            nibble_keys(c, BLOCK, m, a.n_nibbles, a.nib_coord, a.nib_shift, a.nib_tables,
+        if a.windows:
+            window_keys(c, BLOCK, m, a.n_windows, a.win_coord, a.win_shift, a.win_tables,
                         a.d[0] + b, a.d[1] + b, a.d[2] + b, a.octant, keys + (b - start))
             b += m
             continue
@@ -836,7 +838,7 @@ def _inputs(rays, str coordinates, bounds, const uint64_t[:, :, ::1] table, floa
     out.a.octant = octant
     if not low_bytes:
         plan_lookups(&out.a, 5 if out.a.mode == DIR_OCTAHEDRAL else 6)
-    plan_nibbles(&out.a, 5 if out.a.mode == DIR_OCTAHEDRAL else 6)
+    plan_windows(&out.a, 5 if out.a.mode == DIR_OCTAHEDRAL else 6)
     return out
 
 

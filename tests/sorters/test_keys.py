@@ -170,8 +170,9 @@ def test_short_keys_are_the_table_lookups(mode, rng):
 
 def lookup_tables(rng):
     """short_tables and, for the builds that assemble keys in vector registers: keys that
-    read both nibbles of a coordinate's high byte (six lookups, and eight), and one too
-    long for the key's high 32 bits (which those builds leave to the scalar lookups)."""
+    read a coordinate's whole high byte (two lookups per coordinate: six in all, and
+    eight), and one too long for the key's high 32 bits (which those builds leave to the
+    scalar lookups)."""
     yield from short_tables(rng)
     yield "eight-bits", _keysort.key_table([(0, 1, 2)] * 8)[0]
     yield "eight-lookups", _keysort.key_table([(0, 1, 2, 3)] * 7)[0]
@@ -182,7 +183,7 @@ def lookup_tables(rng):
 @pytest.mark.parametrize("n", [1, 7, 9, 16, 1500])
 @pytest.mark.parametrize("mode", ["components", "octahedral", "end_point"])
 def test_keys_on_every_isa(mode, n, octant, rng, each_isa):
-    """Every build's keys (on AVX-512 assembled sixteen at a time from nibble tables,
+    """Every build's keys (on AVX-512 assembled sixteen at a time from 32-entry tables,
     with a masked last vector) are the OR of the table's rows at the quantised
     coordinates, with the octant's signs on top."""
     rays = inside_rays(rng, n)

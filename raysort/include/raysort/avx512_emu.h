@@ -241,14 +241,6 @@ RS_EMU rs_emu_m512 rs_emu_permutex2var_ps(rs_emu_m512 a, rs_emu_m512i idx, rs_em
     return r;
 }
 
-/* VPERMD: lane j is lane idx[j] & 15 of a */
-RS_EMU rs_emu_m512i rs_emu_permutexvar_epi32(rs_emu_m512i idx, rs_emu_m512i a)
-{
-    rs_emu_m512i r;
-    for (int j = 0; j < 16; ++j)
-        r.i[j] = a.i[idx.i[j] & 15];
-    return r;
-}
 /* VPERMT2D: lane j is lane idx[j] & 15 of b when bit 4 of idx[j] is set, else of a */
 RS_EMU rs_emu_m512i rs_emu_permutex2var_epi32(rs_emu_m512i a, rs_emu_m512i idx, rs_emu_m512i b)
 {
@@ -326,7 +318,6 @@ RS_EMU void rs_emu_mask_storeu_epi32(void *p, rs_emu_mask16 k, rs_emu_m512i a)
 #define _mm512_unpackhi_ps(a, b) rs_emu_unpack_ps(a, b, 1)
 #define _mm512_shuffle_ps rs_emu_shuffle_ps
 #define _mm512_permutex2var_ps rs_emu_permutex2var_ps
-#define _mm512_permutexvar_epi32 rs_emu_permutexvar_epi32
 #define _mm512_permutex2var_epi32 rs_emu_permutex2var_epi32
 #define _mm512_srlv_epi32 rs_emu_srlv_epi32
 #define _mm512_or_si512 rs_emu_or_si512
