@@ -42,7 +42,7 @@ marks such rays inactive anyway.
 """
 from libc.math cimport INFINITY, copysignf, fabsf
 from libc.stdint cimport int32_t, int64_t, uint32_t, uint64_t
-from libc.string cimport memset
+from libc.string cimport memcmp, memset
 cimport numpy as cnp
 # rs_maxf and rs_minf: for the C below, which calls them
 from raysort._types cimport rs_maxf, rs_minf, RS_RAY_ROWS, RS_RAY_OX, RS_RAY_DX, RS_RAY_TMAX  # no-cython-lint
@@ -58,6 +58,7 @@ cdef enum:
     KEY_COORDS = 6          # most coordinates a key draws from
     COORD_BITS_C = 16       # bits each coordinate is quantised to
     TABLE_ROW = 256         # entries of a key table row: one per value of a coordinate byte
+    TABLE_BYTES = KEY_COORDS * 2 * TABLE_ROW * 8    # a whole key table
 #: bits each coordinate is quantised to (a key table has two byte-tables per coordinate)
 COORD_BITS = COORD_BITS_C
 #: most coordinates a key draws from
@@ -786,7 +787,7 @@ def _inputs(rays, str coordinates, bounds, const uint64_t[:, :, ::1] table, floa
             prev_t, float prev_scale, bint octant):
     """Check the arguments of :func:`make_keys` and :func:`sort_rays` into an :class:`_Inputs`."""
     cdef _Inputs out = _Inputs()
-    cdef int n = len(rays), k, j
+    cdef int n = len(rays), k
     if coordinates not in COORDINATES:
         raise ValueError(f"coordinates must be one of {', '.join(COORDINATES)}; "
                          f"got {coordinates!r}")
@@ -796,16 +797,12 @@ def _inputs(rays, str coordinates, bounds, const uint64_t[:, :, ::1] table, floa
     cdef const float[:, ::1] box = np.ascontiguousarray(bounds, dtype=np.float32).reshape(2, 3)
     cdef float extent
     cdef float inv[3]
-    cdef bint low_bytes = False
     for k in range(3):
         # 1 / extent, 0 on a flat (or inverted, or non-finite) axis: it carries no order
         extent = box[1, k] - box[0, k]
         inv[k] = ONE / extent if extent > 0 else 0
         if not inv[k] < INFINITY:
             inv[k] = 0
-    for k in range(MAX_COORDS):
-        for j in range(256):
-            low_bytes |= table[k, 0, j] != 0
     # the batch's rows themselves (RS_RAY_*), as nah reads them: no view per row
     cdef const float[:, ::1] data = rays.data
     cdef const float[::1] row
@@ -819,6 +816,8 @@ def _inputs(rays, str coordinates, bounds, const uint64_t[:, :, ::1] table, floa
     out.n = n
     if n == 0:
         return out
+    # first: a plan copied from the last one overwrites every field
+    plan(&out.a, &table[0, 0, 0], COORDINATES[coordinates], octant)
     for k in range(3):
         out.a.o[k] = &data[RS_RAY_OX + k, 0]
         out.a.d[k] = &data[RS_RAY_DX + k, 0]
@@ -830,16 +829,45 @@ def _inputs(rays, str coordinates, bounds, const uint64_t[:, :, ::1] table, floa
     if prev_t is not None:
         row = prev_t
         out.a.prev_t = &row[0]
-    out.a.mode = COORDINATES[coordinates]
     out.a.length = length
     out.a.prev_scale = prev_scale
-    out.a.table = &table[0, 0, 0]
-    out.a.low_bytes = low_bytes
-    out.a.octant = octant
-    if not low_bytes:
-        plan_lookups(&out.a, 5 if out.a.mode == DIR_OCTAHEDRAL else 6)
-    plan_windows(&out.a, 5 if out.a.mode == DIR_OCTAHEDRAL else 6)
     return out
+
+
+# the last key plan made (its own copy of the table in keep): a sorter's next call, with
+# the same table, mode and octant, copies it instead of planning again (3 of the 8 us a
+# call cost before the rays: the table scans of plan_lookups and plan_windows)
+cdef _Inputs last_plan = None
+
+
+cdef void plan(KeyInputs *a, const uint64_t *table, int mode, bint octant) except *:
+    """The fields of ``a`` that depend only on the table, the mode and the octant flag
+    (set first: a plan copied from ``last_plan`` overwrites every field)."""
+    global last_plan
+    cdef int k, j, n_coords = 5 if mode == DIR_OCTAHEDRAL else 6
+    cdef object copy
+    cdef const uint64_t[::1] flat
+    if (last_plan is not None and last_plan.a.mode == mode and last_plan.a.octant == octant
+            and memcmp(last_plan.a.table, table, TABLE_BYTES) == 0):
+        a[0] = last_plan.a
+        a.table = table
+        return
+    a.mode = mode
+    a.octant = octant
+    a.table = table
+    a.low_bytes = False
+    for k in range(MAX_COORDS):
+        for j in range(TABLE_ROW):
+            a.low_bytes |= table[2 * k * TABLE_ROW + j] != 0
+    if not a.low_bytes:
+        plan_lookups(a, n_coords)
+    plan_windows(a, n_coords)
+    copy = np.frombuffer((<const char *> table)[:TABLE_BYTES], np.uint64).copy()
+    flat = copy
+    last_plan = _Inputs()
+    last_plan.a = a[0]
+    last_plan.a.table = &flat[0]
+    last_plan.keep = copy
 
 
 def make_keys(rays, str coordinates, bounds, const uint64_t[:, :, ::1] table, *,
@@ -1288,25 +1316,30 @@ cdef object sort_packets(const KeyInputs *a, const uint64_t *keys, const int32_t
     order = np.empty(n + IOTA_SPILL + 1, dtype=np.int32)     # (room for iota past the end)
     offsets = np.empty(n + 1, dtype=np.int32)
     cdef int32_t[::1] order_mv = order, offsets_mv = offsets
-    cdef uint64_t[::1] ckey = np.empty(widest, np.uint64), ckey_tmp = np.empty(widest, np.uint64)
-    cdef uint64_t[::1] skey = np.empty(widest, np.uint64)
-    cdef int32_t[::1] citem = np.empty(widest, np.int32), citem_tmp = np.empty(widest, np.int32)
-    cdef int32_t[::1] cstart = np.empty(widest + 1, np.int32)
-    cdef int32_t[::1] count = np.empty(COUNT_SIZE, np.int32)
+    # the work buffers, in one allocation: three of uint64 keys, then of int32 items (two,
+    # the chunk starts, the radix counts)
+    cdef uint64_t[::1] work = np.empty(3 * widest + (3 * widest + 1 + COUNT_SIZE + 1) // 2,
+                                       np.uint64)
+    cdef uint64_t *ckey = &work[0]
+    cdef uint64_t *ckey_tmp = ckey + widest
+    cdef uint64_t *skey = ckey_tmp + widest
+    cdef int32_t *citem = <int32_t *> (skey + widest)
+    cdef int32_t *citem_tmp = citem + widest
+    cdef int32_t *cstart = citem_tmp + widest
+    cdef int32_t *count = cstart + widest + 1
     cdef const uint64_t *kp
     with nogil:
         for p in range(n_packets):
             if packets[p + 1] > packets[p]:
                 prefetch_out(&order_mv[packets[p]], packets[p + 1] - packets[p])
                 if a != NULL:       # sort_packet reads the keys from its own work buffer
-                    ray_keys(a, packets[p], packets[p + 1] - packets[p], &ckey[0])
-                    kp = &ckey[0]
+                    ray_keys(a, packets[p], packets[p + 1] - packets[p], ckey)
+                    kp = ckey
                 else:
                     kp = keys + packets[p]
                 n_sub += sort_packet(kp, packets[p], packets[p + 1], digits, compress,
                                      packet_size, split_bits, &order_mv[0], &offsets_mv[n_sub],
-                                     &ckey[0], &citem[0], &ckey_tmp[0], &citem_tmp[0],
-                                     &cstart[0], &skey[0], &count[0])
+                                     ckey, citem, ckey_tmp, citem_tmp, cstart, skey, count)
     offsets_mv[n_sub] = n
     return order[:n], offsets[:n_sub + 1].copy()
 

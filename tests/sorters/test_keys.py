@@ -204,6 +204,27 @@ def test_keys_on_every_isa(mode, n, octant, rng, each_isa):
         assert np.array_equal(got, want), name
 
 
+def test_a_table_changed_in_place_is_planned_again(rng, each_isa):
+    """The module keeps the last table's plan (the pairs and windows it looks up) and
+    reuses it for an equal table: one changed in place between calls, or the same table
+    with the octant flag or mode changed, must not get the old plan."""
+    module = isa.module("sorters._keysort")
+    rays = inside_rays(rng, 300)
+    q = np.zeros((6, len(rays)), np.int64)
+    for k in range(6):
+        q[k] = quantised("components", rays, BOX, k)
+    table = _keysort.key_table([(0, 1, 2, 3, 4, 5)] * 4)[0]
+    first = module.make_keys(rays, "components", BOX, table)
+    assert np.array_equal(first, apply_table(table, q))
+    table[[0, 3]] = table[[3, 0]]           # origin x and direction x swap places
+    assert np.array_equal(module.make_keys(rays, "components", BOX, table),
+                          apply_table(table, q))
+    signs = sum((rays.directions[k] < 0).astype(np.uint64) << np.uint64(63 - k)
+                for k in range(3))
+    assert np.array_equal(module.make_keys(rays, "components", BOX, table, octant=True),
+                          apply_table(table, q) >> np.uint64(3) | signs)
+
+
 @pytest.mark.parametrize("prev", [None, "some"], ids=["fixed-length", "prev_t"])
 def test_end_point_coordinates(prev, rng):
     rays = inside_rays(rng, 2000)
