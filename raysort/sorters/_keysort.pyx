@@ -1024,7 +1024,7 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     """Sort rays [start, end), whose keys are keys[0, end - start), into
     order[start:end]; write sub-packet starts to offsets and return their number.
     Work buffers hold end - start (+1) items, ``count`` :data:`COUNT_SIZE` ints."""
-    cdef int i, j, c, nc = 0, flip, low_bit, width, passes, buckets, shift1, shift2
+    cdef int i, j, c, runs, nc = 0, flip, low_bit, width, passes, buckets, shift1, shift2
     cdef int descents
     cdef uint64_t mask, low, key, all_and, all_or, dmask
     cdef int32_t *h1
@@ -1043,14 +1043,14 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     # keys: compression pays only when they are long (the order is the same); and
     # whether the sorted bits ever descend (one loop the compiler vectorises)
     all_and, all_or = keys[0], keys[0]
-    c = 1
+    runs = 1
     descents = 0
     for i in range(1, n):
         all_and &= keys[i]
         all_or |= keys[i]
-        c += keys[i] != keys[i - 1]
+        runs += keys[i] != keys[i - 1]
         descents |= (keys[i] & mask) < (keys[i - 1] & mask)
-    compress = compress and 2 * c <= n
+    compress = compress and 2 * runs <= n
     if not compress and not descents:
         # already in order (coherent rays often are: camera rays in their tile's Morton
         # order): the stable sort leaves every ray where it is.  (Not where long runs of
@@ -1071,7 +1071,7 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
                 ckey[i] = (keys[i] & mask) | <uint64_t> i
             nc = n
         else:
-            nc = make_chunks(keys, start, end, compress, True, mask, ckey, citem, cstart)
+            nc = make_chunks(keys, start, end, compress, runs, True, mask, ckey, citem, cstart)
         sort_u64(ckey, nc, NULL)
         if simple:
             for i in range(n):
@@ -1108,7 +1108,7 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
                     count[j * buckets + ((key >> (low_bit + j * width)) & dmask)] += 1
         nc = n
     else:
-        nc = make_chunks(keys, start, end, compress, packed, mask, ckey, citem, cstart)
+        nc = make_chunks(keys, start, end, compress, runs, packed, mask, ckey, citem, cstart)
         for i in range(nc):
             key = ckey[i]
             count[(key >> low_bit) & dmask] += 1
@@ -1198,27 +1198,49 @@ cdef inline void gather_run(const uint64_t *keys, int n, int bottom, int length,
         k32[i] |= <uint32_t> ((keys[i] >> bottom) & m) << at
 
 
-cdef int make_chunks(const uint64_t *keys, int start, int end, bint compress, bint packed,
-                     uint64_t mask, uint64_t *ckey, int32_t *citem,
+cdef inline void put_chunk(int nc, uint64_t key, int32_t first, bint packed, uint64_t mask,
+                           uint64_t *ckey, int32_t *citem, int32_t *cstart) noexcept nogil:
+    """Chunk nc's key (packed: with nc in the low bits, else nc to citem) and first ray."""
+    if packed:
+        ckey[nc] = (key & mask) | <uint64_t> nc
+    else:
+        ckey[nc] = key
+        citem[nc] = nc
+    cstart[nc] = first
+
+
+cdef int make_chunks(const uint64_t *keys, int start, int end, bint compress, int runs,
+                     bint packed, uint64_t mask, uint64_t *ckey, int32_t *citem,
                      int32_t *cstart) noexcept nogil:
     """The chunks of rays [start, end) (keys[0, end - start)) to sort: every ray, or
-    (compress) every run of equal keys in input order.  Writes each chunk's key (packed:
-    with its index in the low bits, else the index to citem) and its first ray to
-    cstart (and the end after the last); returns their number.  keys may be ckey:
-    chunk nc <= ray i is written after ray i is read."""
-    cdef int i, nc = 0
-    cdef uint64_t key, prev = 0
-    for i in range(end - start):
-        key = keys[i]
-        if not compress or i == 0 or key != prev:
-            if packed:
-                ckey[nc] = (key & mask) | <uint64_t> nc
-            else:
-                ckey[nc] = key
-                citem[nc] = nc
-            cstart[nc] = start + i
-            nc += 1
-        prev = key
+    (compress) every run of equal keys in input order (``runs`` of them).  Writes each
+    chunk's key (packed: with its index in the low bits, else the index to citem) and
+    its first ray to cstart (and the end after the last); returns their number.  keys
+    may be ckey: chunk nc <= ray i is written after ray i is read.
+
+    Where runs are long (camera rays: one run in 20 to 1,000 rays), a test per ray
+    that rarely changes its answer; else without branches: every ray writes the next
+    chunk's slot and the count moves on where a run starts, so that a later run's
+    first ray overwrites the slot.  Run starts are data the branch predictor cannot
+    learn (except from the same keys sorted again and again, as a warm loop of sorts
+    does): after a trace, the branchy loop took 0.21 ms of garanzha's sort of
+    Sibenik's shadow rays (one run in 3 rays), the branchless one 0.17 ms, and 1.34x
+    the time on its camera rays."""
+    cdef int i, n = end - start, nc = 0, every = not compress
+    cdef uint64_t key, prev = ~keys[0] if n else 0     # the first ray starts a run
+    if compress and 8 * runs <= n:
+        for i in range(n):
+            key = keys[i]
+            if key != prev:
+                put_chunk(nc, key, start + i, packed, mask, ckey, citem, cstart)
+                nc += 1
+            prev = key
+    else:
+        for i in range(n):
+            key = keys[i]
+            put_chunk(nc, key, start + i, packed, mask, ckey, citem, cstart)
+            nc += (key != prev) | every
+            prev = key
     cstart[nc] = end
     return nc
 
