@@ -114,6 +114,29 @@ cdef int runs_bad(const int32_t *order, const int32_t *offsets, Py_ssize_t n_sub
     return rays_bad(order, run, n, lo, hi, seen) if n_sub > 0 else 0
 
 
+cdef int identity_cuts_bad(const int32_t *offsets, Py_ssize_t n_sub, const int32_t *packets,
+                           Py_ssize_t n_big, int32_t n, int64_t max_packet) noexcept nogil:
+    """Non-zero if the identity order's offsets (from 0 to n) break the contract: the
+    rules of :func:`offsets_bad`, and a sub-packet holding rays of two large packets,
+    that is, a boundary of a large packet inside (0, n) that no sub-packet starts at
+    (both ascend: one walk over the offsets).  For ``none``'s result the loop over the
+    sub-packets that finds what is wrong took 5 us of every 7 us call (131,072 rays in
+    sub-packets of 64); :func:`sort_kernel` says what is wrong."""
+    cdef Py_ssize_t j = 0, k
+    cdef int32_t p
+    if offsets_bad(offsets, n_sub, n, <int32_t> min(max_packet, <int64_t> n)):
+        return 1
+    for k in range(n_big + 1):
+        p = packets[k]
+        if p <= 0 or p >= n:
+            continue
+        while j < n_sub and offsets[j] < p:
+            j += 1
+        if offsets[j] != p:         # (j <= n_sub, and offsets[n_sub] = n)
+            return 1
+    return 0
+
+
 cdef int sort_kernel(const int32_t *order, const int32_t *offsets, Py_ssize_t n_sub,
                      const int32_t *packets, Py_ssize_t n_big, int32_t n, int64_t max_packet,
                      bint known_identity, uint8_t *seen, Py_ssize_t *where) noexcept nogil:
@@ -126,7 +149,10 @@ cdef int sort_kernel(const int32_t *order, const int32_t *offsets, Py_ssize_t n_
         return BAD_OFFSETS_START
     if offsets[n_sub] != n:
         return BAD_OFFSETS_END
-    if not identity:
+    if identity:
+        if not identity_cuts_bad(offsets, n_sub, packets, n_big, n, max_packet):
+            return 0
+    else:
         if not runs_bad(order, offsets, n_sub, packets, n_big, n, max_packet, seen):
             return 0
         memset(seen, 0, n + 1)      # found bad: sub-packet by sub-packet, what and where

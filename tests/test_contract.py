@@ -217,6 +217,41 @@ def test_check_agrees_with_the_contract_on_random_results(each_isa):
     assert verdicts == {True, False}
 
 
+def test_identity_check_agrees_with_the_contract(each_isa):
+    """The identity order's check (``identity=True``: the order is not read, each
+    large-packet boundary must start a sub-packet) passes exactly when the NumPy
+    statement of the contract holds for ``arange(n)``, and finds the same fault, at the
+    same place, as the check that reads the order."""
+    from raysort import isa
+    from raysort.orders import identity_order
+    kernel = isa.module("_contract").sort_result
+    rng = np.random.default_rng(11)
+    verdicts = set()
+    for _ in range(600):
+        n = int(rng.integers(1, 300))
+        inner = np.sort(rng.choice(np.arange(1, n), size=min(n - 1, int(rng.integers(0, 6))),
+                                   replace=False)) if n > 1 else []
+        packets = np.concatenate([[0], inner, [n]]).astype(np.int32)
+        if rng.random() < 0.2 and len(packets) > 2:     # an empty large packet
+            packets = np.insert(packets, 1, packets[1])
+        if rng.random() < 0.5:      # cut at every boundary, and between them
+            cuts = np.union1d(packets, rng.choice(np.arange(n + 1), size=3))
+        else:                       # anywhere
+            cuts = np.union1d([0, n], rng.choice(np.arange(n + 1), size=int(rng.integers(0, 8))))
+        offsets = cuts.astype(np.int32)
+        if rng.random() < 0.1 and len(offsets) > 2:     # a sub-packet of no rays
+            offsets = np.insert(offsets, 1, offsets[1])
+        max_packet = int(rng.choice([MAX_PACKET, 1 + int(rng.integers(n))]))
+        order = identity_order(n)
+        holds = (_contract_holds(np.arange(n), offsets, packets, n)
+                 and np.diff(offsets).max() <= max_packet)
+        verdicts.add(bool(holds))
+        got = kernel(order, offsets, packets, n, max_packet, True)
+        assert (got[0] == 0) == holds, (n, packets, offsets, max_packet)
+        assert got == kernel(order, offsets, packets, n, max_packet, False)
+    assert verdicts == {True, False}
+
+
 # -- the framework runs the check -----------------------------------------------------------
 
 class BrokenSorter(raysort.Sorter):
