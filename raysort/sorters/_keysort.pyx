@@ -19,6 +19,11 @@ vectorises:
 
 A key that reads only the high byte of each coordinate (every default key) is
 looked up two coordinates at a time (:func:`plan_lookups`): three loads per ray.
+The avx512 build assembles it in vector registers instead where its bits fit the
+key's top 32 (:func:`plan_windows`, ``rs_keysort_window_keys``): sixteen rays at
+a time, one VPERMT2D lookup in a 32-entry table per coordinate (two for one whose
+whole byte counts).  A sorter's next call with the same table reuses the plan
+(``last_plan``).
 
 Keys are left aligned in a uint64: the sort looks at the top ``8 * digits``
 bits.  Within every large packet, ``(key, ray)`` pairs are sorted stably,
