@@ -167,6 +167,13 @@ def _contract_holds(order, offsets, packets, n):
     return all(np.all(packet_of[a:b] == packet_of[a]) for a, b in zip(offsets[:-1], offsets[1:]))
 
 
+def _random_packets(rng, n, most):
+    """Large-packet boundaries of ``n`` rays: 0, fewer than ``most`` inner ones, n."""
+    inner = np.sort(rng.choice(np.arange(1, n), size=min(n - 1, int(rng.integers(0, most))),
+                               replace=False)) if n > 1 else []
+    return np.concatenate([[0], inner, [n]]).astype(np.int32)
+
+
 def _random_result(rng, n, packets):
     """A valid order: each large packet's rays shuffled and cut into sub-packets, the
     sub-packets of all packets in a random order (the contract allows them interleaved)."""
@@ -191,9 +198,7 @@ def test_check_agrees_with_the_contract_on_random_results(each_isa):
     verdicts = set()
     for _ in range(400):
         n = int(rng.integers(1, 200))
-        inner = np.sort(rng.choice(np.arange(1, n), size=min(n - 1, int(rng.integers(0, 5))),
-                                   replace=False)) if n > 1 else []
-        packets = np.concatenate([[0], inner, [n]]).astype(np.int32)
+        packets = _random_packets(rng, n, 5)
         order, offsets = _random_result(rng, n, packets)
         check_sort(NAME, (order, offsets), n, packets)
         mutation = rng.integers(4)
@@ -229,9 +234,7 @@ def test_identity_check_agrees_with_the_contract(each_isa):
     verdicts = set()
     for _ in range(600):
         n = int(rng.integers(1, 300))
-        inner = np.sort(rng.choice(np.arange(1, n), size=min(n - 1, int(rng.integers(0, 6))),
-                                   replace=False)) if n > 1 else []
-        packets = np.concatenate([[0], inner, [n]]).astype(np.int32)
+        packets = _random_packets(rng, n, 6)
         if rng.random() < 0.2 and len(packets) > 2:     # an empty large packet
             packets = np.insert(packets, 1, packets[1])
         if rng.random() < 0.5:      # cut at every boundary, and between them
