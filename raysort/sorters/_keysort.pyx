@@ -130,16 +130,19 @@ cdef extern from *:
      * return the second operand on NaN, as rs_maxf/rs_minf do, so every ISA gives the
      * same q (sixteen at a time with AVX-512, eight with AVX2, four with SSE); written
      * with intrinsics because the compiler leaves the branchy scalar form unvectorised. */
+    #if RS_ISA_AVX512
+    static inline __m512i rs_keysort_quantise16(__m512 c)
+    {
+        __m512 x = _mm512_min_ps(_mm512_max_ps(c, _mm512_set1_ps(0.0f)), _mm512_set1_ps(1.0f));
+        return _mm512_cvttps_epi32(_mm512_mul_ps(x, _mm512_set1_ps(65535.0f)));
+    }
+    #endif
     static inline void rs_keysort_quantise(const float *c, int32_t *q, int m)
     {
         int j = 0;
     #if RS_ISA_AVX512
-        const __m512 zero16 = _mm512_set1_ps(0.0f), one16 = _mm512_set1_ps(1.0f),
-                     qmax16 = _mm512_set1_ps(65535.0f);
-        for (; j + 16 <= m; j += 16) {
-            __m512 x = _mm512_min_ps(_mm512_max_ps(_mm512_loadu_ps(c + j), zero16), one16);
-            _mm512_storeu_si512((void *)(q + j), _mm512_cvttps_epi32(_mm512_mul_ps(x, qmax16)));
-        }
+        for (; j + 16 <= m; j += 16)
+            _mm512_storeu_si512((void *)(q + j), rs_keysort_quantise16(_mm512_loadu_ps(c + j)));
     #endif
     #if RS_ISA_AVX2
         const __m256 zero8 = _mm256_setzero_ps(), one8 = _mm256_set1_ps(1.0f),
@@ -344,10 +347,10 @@ cdef extern from *:
      * key is the OR over those windows of a 32-entry table indexed by the window's
      * bits, which VPERMT2D looks up for sixteen rays at once (the scalar path reads
      * three 256-entry pair tables per ray).  Table t, its entries at tables[32 * t],
-     * serves coordinate c[coord[t] * stride + j], quantised as rs_keysort_quantise
-     * does, >> shift[t] (11 or 8: VPERMT2D reads the low five bits); n_tables is 6 or
-     * 12 (unused tables are zero), so that the loop over them unrolls with every table
-     * in registers.  With octant, bits 31, 30, 29 are the signs of dx, dy, dz.  The
+     * serves coordinate c[coord[t] * stride + j], quantised by rs_keysort_quantise16
+     * (as rs_keysort_quantise does), >> shift[t] (11 or 8: VPERMT2D reads the low five
+     * bits); n_tables is 6 or 12 (unused tables are zero), so that the loop over them
+     * unrolls with every table in registers.  With octant, bits 31, 30, 29 are the signs of dx, dy, dz.  The
      * keys are the scalar path's, bit for bit (plan_windows checks the rows). */
     #define RS_KEYSORT_WINDOWS RS_ISA_AVX512
     #define RS_KEYSORT_TABLE_SLOTS 6
@@ -361,8 +364,7 @@ cdef extern from *:
                                             const float *dy, const float *dz, int octant,
                                             uint64_t *keys)
     {
-        const __m512 zero = _mm512_set1_ps(0.0f), one = _mm512_set1_ps(1.0f),
-                     qmax = _mm512_set1_ps(65535.0f);
+        const __m512 zero = _mm512_set1_ps(0.0f);
         const __m512i none = _mm512_set1_epi32(0),
                       lo = _mm512_loadu_si512(rs_keysort_widen[0]),
                       hi = _mm512_loadu_si512(rs_keysort_widen[1]);
@@ -380,9 +382,7 @@ cdef extern from *:
             __mmask16 k = (__mmask16)(m - j >= 16 ? 0xFFFF : (1u << (m - j)) - 1);
             __m512i h = none;
             for (int t = 0; t < n_tables; ++t) {
-                __m512 x = _mm512_maskz_loadu_ps(k, row[t] + j);
-                __m512i q = _mm512_cvttps_epi32(_mm512_mul_ps(
-                    _mm512_min_ps(_mm512_max_ps(x, zero), one), qmax));
+                __m512i q = rs_keysort_quantise16(_mm512_maskz_loadu_ps(k, row[t] + j));
                 h = _mm512_or_si512(h, _mm512_permutex2var_epi32(
                     low[t], _mm512_srlv_epi32(q, count[t]), high[t]));
             }

@@ -168,6 +168,13 @@ def test_short_keys_are_the_table_lookups(mode, rng):
         assert np.array_equal(got, apply_table(table, q)), name
 
 
+def with_octant(keys, rays):
+    """Keys shifted down by three bits under the octant's: bit 63 - k is d[k] < 0."""
+    signs = sum((rays.directions[k] < 0).astype(np.uint64) << np.uint64(63 - k)
+                for k in range(3))
+    return keys >> np.uint64(3) | signs
+
+
 def lookup_tables(rng):
     """short_tables and, for the builds that assemble keys in vector registers: keys that
     read a coordinate's whole high byte (two lookups per coordinate: six in all, and
@@ -191,14 +198,12 @@ def test_keys_on_every_isa(mode, n, octant, rng, each_isa):
     q = np.zeros((6, n), np.int64)
     for k in range(n_coords):
         q[k] = quantised(mode, rays, BOX, k, length=2.5)
-    signs = sum((rays.directions[k] < 0).astype(np.uint64) << np.uint64(63 - k)
-                for k in range(3))
     for name, table in lookup_tables(rng):
         table = table.copy()
         table[n_coords:] = 0
         want = apply_table(table, q)
         if octant:
-            want = want >> np.uint64(3) | signs
+            want = with_octant(want, rays)
         got = isa.module("sorters._keysort").make_keys(rays, mode, BOX, table, length=2.5,
                                                        octant=octant)
         assert np.array_equal(got, want), name
@@ -219,10 +224,8 @@ def test_a_table_changed_in_place_is_planned_again(rng, each_isa):
     table[[0, 3]] = table[[3, 0]]           # origin x and direction x swap places
     assert np.array_equal(module.make_keys(rays, "components", BOX, table),
                           apply_table(table, q))
-    signs = sum((rays.directions[k] < 0).astype(np.uint64) << np.uint64(63 - k)
-                for k in range(3))
     assert np.array_equal(module.make_keys(rays, "components", BOX, table, octant=True),
-                          apply_table(table, q) >> np.uint64(3) | signs)
+                          with_octant(apply_table(table, q), rays))
 
 
 @pytest.mark.parametrize("prev", [None, "some"], ids=["fixed-length", "prev_t"])
