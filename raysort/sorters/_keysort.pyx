@@ -350,8 +350,9 @@ cdef extern from *:
      * serves coordinate c[coord[t] * stride + j], quantised by rs_keysort_quantise16
      * (as rs_keysort_quantise does), >> shift[t] (11 or 8: VPERMT2D reads the low five
      * bits); n_tables is 6 or 12 (unused tables are zero), so that the loop over them
-     * unrolls with every table in registers.  With octant, bits 31, 30, 29 are the signs of dx, dy, dz.  The
-     * keys are the scalar path's, bit for bit (plan_windows checks the rows). */
+     * unrolls with every table in registers.  With octant, bits 31, 30, 29 are the
+     * signs of dx, dy, dz.  The keys are the scalar path's, bit for bit (plan_windows
+     * checks the rows). */
     #define RS_KEYSORT_WINDOWS RS_ISA_AVX512
     #define RS_KEYSORT_TABLE_SLOTS 6
     #if RS_ISA_AVX512
