@@ -87,20 +87,18 @@ cdef int is_identity(const int32_t *order, int32_t n) noexcept nogil:
 
 
 cdef int runs_bad(const int32_t *order, const int32_t *offsets, Py_ssize_t n_sub,
-                  const int32_t *packets, Py_ssize_t n_big, int32_t n, int64_t max_packet,
+                  const int32_t *packets, Py_ssize_t n_big, int32_t n,
                   uint8_t *seen) noexcept nogil:
-    """Non-zero if the sort result (offsets from 0 to n) breaks its contract, checked a
-    run of sub-packets at a time: consecutive sub-packets whose first rays lie in one
-    large packet form a run, whose rays must all lie in that packet and each be seen
-    for the first time, the rules of :func:`sub_packet_bad` for each of its sub-packets
-    (each starts in the run's packet).  One loop per large packet, as sorters cut them,
-    instead of one per sub-packet; :func:`sort_kernel` says what is wrong."""
+    """Non-zero if the rays of a sort result whose offsets are valid (:func:`offsets_bad`
+    passed) break its contract, checked a run of sub-packets at a time: consecutive
+    sub-packets whose first rays lie in one large packet form a run, whose rays must all
+    lie in that packet and each be seen for the first time, the rules of
+    :func:`sub_packet_bad` for each of its sub-packets (each starts in the run's
+    packet).  One loop per large packet, as sorters cut them, instead of one per
+    sub-packet; :func:`sort_kernel` says what is wrong."""
     cdef Py_ssize_t k, k_big = 0, run = 0
     cdef int64_t a
     cdef int32_t lo = 0, hi = 0, first
-    # (no sub-packet is longer than n: max_packet capped there fits offsets_bad's int32)
-    if offsets_bad(offsets, n_sub, n, <int32_t> min(max_packet, <int64_t> n)):
-        return 1
     for k in range(n_sub):
         a = offsets[k]
         first = order[a]            # (offsets ascend from 0 to n: a ray of the order)
@@ -115,17 +113,15 @@ cdef int runs_bad(const int32_t *order, const int32_t *offsets, Py_ssize_t n_sub
 
 
 cdef int identity_cuts_bad(const int32_t *offsets, Py_ssize_t n_sub, const int32_t *packets,
-                           Py_ssize_t n_big, int32_t n, int64_t max_packet) noexcept nogil:
-    """Non-zero if the identity order's offsets (from 0 to n) break the contract: the
-    rules of :func:`offsets_bad`, and a sub-packet holding rays of two large packets,
-    that is, a boundary of a large packet inside (0, n) that no sub-packet starts at
-    (both ascend: one walk over the offsets).  For ``none``'s result the loop over the
-    sub-packets that finds what is wrong took 5 us of every 7 us call (131,072 rays in
-    sub-packets of 64); :func:`sort_kernel` says what is wrong."""
+                           Py_ssize_t n_big, int32_t n) noexcept nogil:
+    """Non-zero if the identity order, its offsets valid (:func:`offsets_bad` passed),
+    breaks the contract: a sub-packet holding rays of two large packets, that is, a
+    boundary of a large packet inside (0, n) that no sub-packet starts at (both ascend:
+    one walk over the offsets).  For ``none``'s result the loop over the sub-packets
+    that finds what is wrong took 5 us of every 7 us call (131,072 rays in sub-packets
+    of 64); :func:`sort_kernel` says what is wrong."""
     cdef Py_ssize_t j = 0, k
     cdef int32_t p
-    if offsets_bad(offsets, n_sub, n, <int32_t> min(max_packet, <int64_t> n)):
-        return 1
     for k in range(n_big + 1):
         p = packets[k]
         if p <= 0 or p >= n:
@@ -149,13 +145,18 @@ cdef int sort_kernel(const int32_t *order, const int32_t *offsets, Py_ssize_t n_
         return BAD_OFFSETS_START
     if offsets[n_sub] != n:
         return BAD_OFFSETS_END
-    if identity:
-        if not identity_cuts_bad(offsets, n_sub, packets, n_big, n, max_packet):
+    # the offsets' rules in one vectorised pass (no sub-packet is longer than n: max_packet
+    # capped there fits offsets_bad's int32), then the rays a run at a time (the identity:
+    # its cuts at the large packets); a result found bad is checked again below,
+    # sub-packet by sub-packet, to say what is wrong and where
+    if not offsets_bad(offsets, n_sub, n, <int32_t> min(max_packet, <int64_t> n)):
+        if identity:
+            if not identity_cuts_bad(offsets, n_sub, packets, n_big, n):
+                return 0
+        elif not runs_bad(order, offsets, n_sub, packets, n_big, n, seen):
             return 0
-    else:
-        if not runs_bad(order, offsets, n_sub, packets, n_big, n, max_packet, seen):
-            return 0
-        memset(seen, 0, n + 1)      # found bad: sub-packet by sub-packet, what and where
+    if not identity:
+        memset(seen, 0, n + 1)      # (runs_bad may have marked rays)
     for k in range(n_sub):
         where[0] = k
         a, b = offsets[k], offsets[k + 1]
