@@ -865,9 +865,9 @@ cdef void plan(KeyInputs *a, const uint64_t *table, int mode, bint octant) excep
     for k in range(MAX_COORDS):
         for j in range(TABLE_ROW):
             a.low_bytes |= table[2 * k * TABLE_ROW + j] != 0
-    if not a.low_bytes:
-        plan_lookups(a, n_coords)
     plan_windows(a, n_coords)
+    if not a.low_bytes and not a.windows:      # (the window keys need no pair tables)
+        plan_lookups(a, n_coords)
     copy = np.frombuffer((<const char *> table)[:TABLE_BYTES], np.uint64).copy()
     flat = copy
     last_plan = _Inputs()
