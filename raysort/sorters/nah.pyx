@@ -242,6 +242,152 @@ cdef extern from *:
         for (int i = start; i < end; ++i)
             order[at[key[i - start]]++] = i;
     }
+    /* The few-key passes (avx512 builds).  Shadow rays toward a light fill few
+     * direction buckets of a packet (Sibenik's: two in half the packets, at most seven),
+     * but where a packet straddles a bucket's border they alternate between buckets ray
+     * by ray: the run passes above then go ray by ray, each ray's box update a chain
+     * through memory, and each run's end is a branch a trace leaves unlearnt.  Where a
+     * packet holds at most RS_NAH_FEW buckets (and keys), the avx512 build reads the
+     * whole packet once per bucket (key), sixteen rays at a time under a mask of its
+     * rays, with no branch on the rays; and the cells of any packet sixteen at a time.
+     * Results equal the ray-by-ray passes': min and max taken in another order (the
+     * same values: NaN skipped, as MINPS returns the second operand; only a zero
+     * bound's sign may differ, which no cell test sees), the same comparisons for the
+     * cells, each key's rays written in ray order. */
+    #define RS_NAH_FEW 8
+    static void rs_nah_identity(int start, int n, int32_t *order)   /* one key */
+    {
+        int32_t *out = order + start;
+        for (int i = 0; i < n; ++i)
+            out[i] = start + i;
+    }
+    #if RS_ISA_AVX512
+    #define RS_NAH_VECTOR 1
+    static inline __mmask16 rs_nah_lanes(int j, int n)    /* rays j.. of n, at most 16 */
+    {
+        return n - j >= 16 ? (__mmask16)0xFFFF : (__mmask16)((1u << (n - j)) - 1);
+    }
+    static inline __m512i rs_nah_keys16(const uint8_t *key)   /* sixteen keys, widened */
+    {
+        return _mm512_cvtepu8_epi32(_mm_loadu_si128((const __m128i *)key));
+    }
+    /* Pass 1's bounds: each present bucket's origin box, over the whole packet. */
+    static void rs_nah_few_bounds(const float *const o[3], int start, const uint8_t *key,
+                                  int n, uint32_t present, float (*lo)[3], float (*hi)[3])
+    {
+        const float *x = o[0] + start, *y = o[1] + start, *z = o[2] + start;
+        float tl[3][16], th[3][16];
+        for (; present; present &= present - 1) {
+            int b = rs_lowest((int)present);
+            const __m512i kb = _mm512_set1_epi32(b);
+            __m512 l0 = _mm512_set1_ps(INFINITY), l1 = l0, l2 = l0;
+            __m512 h0 = _mm512_set1_ps(-INFINITY), h1 = h0, h2 = h0;
+            for (int j = 0; j < n; j += 16) {
+                __mmask16 t = rs_nah_lanes(j, n);
+                __mmask16 m = _mm512_mask_cmpeq_epi32_mask(t, rs_nah_keys16(key + j), kb);
+                __m512 vx = _mm512_maskz_loadu_ps(t, x + j);
+                __m512 vy = _mm512_maskz_loadu_ps(t, y + j);
+                __m512 vz = _mm512_maskz_loadu_ps(t, z + j);
+                l0 = _mm512_mask_min_ps(l0, m, vx, l0);
+                h0 = _mm512_mask_max_ps(h0, m, vx, h0);
+                l1 = _mm512_mask_min_ps(l1, m, vy, l1);
+                h1 = _mm512_mask_max_ps(h1, m, vy, h1);
+                l2 = _mm512_mask_min_ps(l2, m, vz, l2);
+                h2 = _mm512_mask_max_ps(h2, m, vz, h2);
+            }
+            _mm512_storeu_ps(tl[0], l0);
+            _mm512_storeu_ps(tl[1], l1);
+            _mm512_storeu_ps(tl[2], l2);
+            _mm512_storeu_ps(th[0], h0);
+            _mm512_storeu_ps(th[1], h1);
+            _mm512_storeu_ps(th[2], h2);
+            for (int a = 0; a < 3; ++a)
+                for (int k = 0; k < 16; ++k) {
+                    lo[b][a] = rs_minf(tl[a][k], lo[b][a]);
+                    hi[b][a] = rs_maxf(th[a][k], hi[b][a]);
+                }
+        }
+    }
+    /* Pass 2: key = bucket * 8 + origin-grid cell, sixteen rays at a time, each ray's
+     * middles and cell bits (grid_cell's: one per split axis, in axis order) looked up
+     * by its bucket in 32-entry tables.  Writes up to 15 keys past n (into the key
+     * buffer's slack). */
+    static void rs_nah_vector_cells(const float *const o[3], int start, uint8_t *key, int n,
+                                    const uint8_t *axes, const float (*mid)[3], int buckets)
+    {
+        float m[3][32];
+        int32_t bit[3][32];
+        __m512 mlo[3], mhi[3];
+        __m512i blo[3], bhi[3];
+        memset(m, 0, sizeof m);
+        memset(bit, 0, sizeof bit);
+        for (int b = 0; b < buckets; ++b) {
+            int s0 = axes[b] & 1, s1 = axes[b] >> 1 & 1, s2 = axes[b] >> 2 & 1;
+            bit[0][b] = s0;
+            bit[1][b] = s1 << s0;
+            bit[2][b] = s2 << (s0 + s1);
+            for (int a = 0; a < 3; ++a)
+                m[a][b] = mid[b][a];
+        }
+        for (int a = 0; a < 3; ++a) {
+            mlo[a] = _mm512_loadu_ps(m[a]);
+            mhi[a] = _mm512_loadu_ps(m[a] + 16);
+            blo[a] = _mm512_loadu_si512((const void *)bit[a]);
+            bhi[a] = _mm512_loadu_si512((const void *)(bit[a] + 16));
+        }
+        for (int j = 0; j < n; j += 16) {
+            __mmask16 t = rs_nah_lanes(j, n);
+            __m512i b = rs_nah_keys16(key + j);
+            __m512i cell = _mm512_slli_epi32(b, 3);
+            for (int a = 0; a < 3; ++a) {
+                __m512 v = _mm512_maskz_loadu_ps(t, o[a] + start + j);
+                __mmask16 ge = _mm512_cmp_ps_mask(
+                    v, _mm512_permutex2var_ps(mlo[a], b, mhi[a]), _CMP_GE_OQ);
+                cell = _mm512_mask_or_epi32(cell, ge, cell,
+                                            _mm512_permutex2var_epi32(blo[a], b, bhi[a]));
+            }
+            _mm_storeu_si128((__m128i *)(key + j), _mm512_cvtepi32_epi8(cell));
+        }
+    }
+    /* The counting sort for few keys (keys[0, n_keys), ascending): each key's rays,
+     * in ray order, compressed sixteen at a time to their place after the last key's;
+     * count[k] = the rays of key k. */
+    static void rs_nah_few_place(const uint8_t *key, int start, int n, const int *keys,
+                                 int n_keys, int *count, int32_t *order)
+    {
+        static const int32_t iota[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14,
+                                         15};
+        const __m512i first = _mm512_add_epi32(_mm512_loadu_si512((const void *)iota),
+                                               _mm512_set1_epi32(start));
+        const __m512i step = _mm512_set1_epi32(16);
+        int32_t *out = order + start;
+        for (int c = 0; c < n_keys; ++c) {
+            const __m512i kc = _mm512_set1_epi32(keys[c]);
+            __m512i id = first;
+            int32_t *at = out;
+            for (int j = 0; j < n; j += 16) {
+                __mmask16 m = _mm512_mask_cmpeq_epi32_mask(rs_nah_lanes(j, n),
+                                                           rs_nah_keys16(key + j), kc);
+                int got = rs_popcount(m);
+                _mm512_mask_storeu_epi32(at, (__mmask16)((1u << got) - 1),
+                                         _mm512_maskz_compress_epi32(m, id));
+                at += got;
+                id = _mm512_add_epi32(id, step);
+            }
+            count[keys[c]] = (int)(at - out);
+            out = at;
+        }
+    }
+    #else
+    #define RS_NAH_VECTOR 0
+    static void rs_nah_few_bounds(const float *const o[3], int start, const uint8_t *key,
+                                  int n, uint32_t present, float (*lo)[3], float (*hi)[3]) {}
+    static void rs_nah_vector_cells(const float *const o[3], int start, uint8_t *key, int n,
+                                    const uint8_t *axes, const float (*mid)[3],
+                                    int buckets) {}
+    static void rs_nah_few_place(const uint8_t *key, int start, int n, const int *keys,
+                                 int n_keys, int *count, int32_t *order) {}
+    #endif
     """
     void place "rs_nah_place"(const uint8_t *key, int start, int end, int *count,
                               int32_t *order) noexcept nogil
@@ -263,6 +409,18 @@ cdef extern from *:
     void place_runs "rs_nah_place_runs"(const uint8_t *key, int start, int end,
                                         const int *count, int n_keys,
                                         int32_t *order) noexcept nogil
+    bint VECTOR "RS_NAH_VECTOR"
+    int FEW "RS_NAH_FEW"
+    void few_bounds "rs_nah_few_bounds"(const float *const *o, int start, const uint8_t *key,
+                                        int n, uint32_t present, float (*lo)[3],
+                                        float (*hi)[3]) noexcept nogil
+    void vector_cells "rs_nah_vector_cells"(const float *const *o, int start, uint8_t *key,
+                                            int n, const uint8_t *axes, const float (*mid)[3],
+                                            int buckets) noexcept nogil
+    void few_place "rs_nah_few_place"(const uint8_t *key, int start, int n, const int *keys,
+                                      int n_keys, int *count, int32_t *order) noexcept nogil
+    int popcount "rs_popcount"(int bits) noexcept nogil
+    void identity "rs_nah_identity"(int start, int n, int32_t *order) noexcept nogil
 
 
 cdef enum:
@@ -318,10 +476,11 @@ cdef int sort_packet(const float[:, ::1] rays, int start, int end, const float *
     cdef float mid[BUCKETS][3]
     cdef uint8_t axes[BUCKETS]
     cdef int count[KEYS]
-    cdef int i, a, b, k, pos, piece, n_sub = 0, most = 0, n = end - start
+    cdef int keys[KEYS]                # few: the keys that can occur, ascending
+    cdef int i, a, b, c, k, pos, piece, n_sub = 0, most = 0, n_keys = 0, n = end - start
     cdef uint8_t split = 0
-    cdef uint32_t present              # bit b: some ray is in bucket b
-    cdef bint runs
+    cdef uint32_t present, b_bits      # bit b: some ray is in bucket b
+    cdef bint runs = False, few, placed = False
     cdef const float *origin[3]
     if n == 0:
         return 0
@@ -331,29 +490,35 @@ cdef int sort_packet(const float[:, ::1] rays, int start, int end, const float *
             hi[b][a] = -INFINITY
     for k in range(KEYS):
         count[k] = 0
-    # pass 1: direction buckets (indices only) and per-bucket origin bounds, by runs of
-    # one bucket where they are long (coherent rays), else ray by ray
-    buckets(&rays[RS_RAY_DX, start], &rays[RS_RAY_DY, start], &rays[RS_RAY_DZ, start], n, key)
-    runs = n >= LONG_RUNS * (changes(key, n) + 1)
-    present = present_buckets(key, n)
     for a in range(3):
         origin[a] = &rays[RS_RAY_OX + a, 0]
-    if runs:
-        run_bounds(origin, start, key, n, lo, hi)
+    # pass 1: direction buckets (indices only) and per-bucket origin bounds: a bucket at
+    # a time where the packet has few (avx512), by runs of one bucket where they are long
+    # (coherent rays), else ray by ray
+    buckets(&rays[RS_RAY_DX, start], &rays[RS_RAY_DY, start], &rays[RS_RAY_DZ, start], n, key)
+    present = present_buckets(key, n)
+    few = VECTOR and bucket_out == NULL and popcount(<int> present) <= FEW
+    if few:
+        few_bounds(origin, start, key, n, present, lo, hi)
     else:
-        for i in range(start, end):
-            b = key[i - start]
-            for a in range(3):
-                lo[b][a] = rs_minf(rays[RS_RAY_OX + a, i], lo[b][a])
-                hi[b][a] = rs_maxf(rays[RS_RAY_OX + a, i], hi[b][a])
+        runs = n >= LONG_RUNS * (changes(key, n) + 1)
+        if runs:
+            run_bounds(origin, start, key, n, lo, hi)
+        else:
+            for i in range(start, end):
+                b = key[i - start]
+                for a in range(3):
+                    lo[b][a] = rs_minf(rays[RS_RAY_OX + a, i], lo[b][a])
+                    hi[b][a] = rs_maxf(rays[RS_RAY_OX + a, i], hi[b][a])
     for b in range(BUCKETS):
         split_axes(lo[b], hi[b], root_extent, threshold, max_axes, &axes[b], mid[b])
         split |= axes[b]
-    # pass 2: origin-grid cell (always 0 where no bucket splits: camera rays); then a
-    # counting sort on (bucket, cell)
+    # pass 2: origin-grid cell (always 0 where no bucket splits: camera rays)
     if split == 0 and bucket_out == NULL:
         for i in range(n):
             key[i] = key[i] * 8
+    elif VECTOR and bucket_out == NULL:
+        vector_cells(origin, start, key, n, axes, mid, BUCKETS)
     elif runs and bucket_out == NULL:
         run_cells(origin, start, key, n, axes, mid)
     else:
@@ -364,12 +529,29 @@ cdef int sort_packet(const float[:, ::1] rays, int start, int end, const float *
                 bucket_out[i] = <uint8_t> b
                 cell_out[i] = <uint8_t> k
             key[i - start] = <uint8_t> (b * 8 + k)
-    # (key * 8 keeps the runs: their count changes only where a bucket splits)
-    runs = runs and (split == 0 or n >= LONG_RUNS * (changes(key, n) + 1))
-    if runs:
-        count_runs(key, n, count)
+    # a counting sort on (bucket, cell): with few keys, placed a key at a time (counts
+    # as they go); else counted first
+    if few:
+        b_bits = present
+        while b_bits and n_keys <= FEW:
+            b = lowest_bit(<int> b_bits)
+            b_bits &= b_bits - 1
+            for c in range(1 << popcount(axes[b])):
+                keys[n_keys] = b * 8 + c
+                n_keys += 1
+        placed = n_keys <= FEW
+    if placed and n_keys == 1:          # one key: the rays in their order
+        count[keys[0]] = n
+        identity(start, n, order)
+    elif placed:
+        few_place(key, start, n, keys, n_keys, count, order)
     else:
-        count_keys(key, n, count)
+        # (key * 8 keeps the runs: their count changes only where a bucket splits)
+        runs = n >= LONG_RUNS * (changes(key, n) + 1)
+        if runs:
+            count_runs(key, n, count)
+        else:
+            count_keys(key, n, count)
     pos = start
     while present:                      # the buckets some ray is in, in order
         b = lowest_bit(<int> present)
@@ -386,7 +568,9 @@ cdef int sort_packet(const float[:, ::1] rays, int start, int end, const float *
             most = max(most, a)
     # coherent rays: in long runs of one key, or one key holds most of them (see
     # rs_nah_place)
-    if runs:
+    if placed:
+        pass
+    elif runs:
         place_runs(key, start, end, count, KEYS, order)
     elif 2 * most > end - start:
         place_coherent(key, start, end, count, KEYS, order)

@@ -106,8 +106,8 @@ def reference_classify(rays, packets, bounds, threshold, max_cells, large_packet
                 hi.append(v.max() if len(v) else np.float32(-np.inf))
             axes = split_axes(lo, hi, root, threshold, max_cells)
             for bit, a in enumerate(axes):
-                mid = np.float32((np.float64(lo[a]) + np.float64(hi[a])) / 2)
-                with np.errstate(invalid="ignore"):
+                with np.errstate(invalid="ignore"):     # (-inf + inf: no ray >= NaN)
+                    mid = np.float32((np.float64(lo[a]) + np.float64(hi[a])) / 2)
                     cell[idx] |= (o[a, idx] >= mid).astype(np.int64) << bit
     return bucket, cell
 
@@ -173,6 +173,44 @@ def coherent_runs(seed=5):
     return rays, packets, np.array([[-2, -1, 0], [2, 1, 1]], dtype=np.float32)
 
 
+def few_buckets(seed=13):
+    """Packets of one to nine direction buckets whose rays alternate between them ray by
+    ray, in runs of 3, or at random, as shadow rays come where a packet straddles a
+    bucket's border: around the avx512 build's few-key passes (at most eight buckets and
+    eight keys) and past them.  Origins spread on none to three axes (grids of 1 to 8
+    cells: 1 to 72 keys), NaN, infinite and signed-zero origin components, and packets
+    of lengths around the 16-lane vector (1, 15, 16, 17, ...)."""
+    rng = np.random.default_rng(seed)
+    heads = np.array([[(-1) ** (o & 1), (-1) ** (o >> 1 & 1), (-1) ** (o >> 2 & 1)]
+                      for o in range(8)], dtype=np.float64)
+    lengths = [1, 15, 16, 17, 31, 33, 200, 1024, 333, 64, 700, 129, 48, 1000, 257, 90]
+    dirs, origins, packets = [], [], [0]
+    for p, length in enumerate(lengths * 2):
+        n_buckets = 1 + p % 9
+        chosen = rng.choice(24, n_buckets, replace=False)
+        pattern = [np.arange(length) % n_buckets, np.arange(length) // 3 % n_buckets,
+                   rng.integers(0, n_buckets, length)][p % 3]
+        bucket = chosen[pattern]
+        d = heads[bucket // 3] * 0.5
+        d[np.arange(length), bucket % 3] *= 2                     # the major axis
+        d += rng.normal(scale=1e-3, size=d.shape)
+        o = rng.random((length, 3)) * [4, 2, 1] - [2, 1, 0]
+        spread = p % 4                                              # axes left spread
+        o[:, spread:] = np.float64([0.25, -0.5, 0.5])[spread:]
+        dirs.append(d)
+        origins.append(o)
+        packets.append(packets[-1] + length)
+    d, o = np.concatenate(dirs), np.concatenate(origins)
+    n = len(d)
+    o[rng.choice(n, 40, replace=False), rng.integers(0, 3, 40)] = np.nan
+    o[rng.choice(n, 20, replace=False), rng.integers(0, 3, 20)] = rng.choice([np.inf, -np.inf],
+                                                                             20)
+    o[rng.choice(n, 60, replace=False), rng.integers(0, 3, 60)] = rng.choice([-0.0, 0.0], 60)
+    rays = RayBatch.from_arrays(o, d)
+    return rays, np.array(packets, dtype=np.int32), np.array([[-2, -1, 0], [2, 1, 1]],
+                                                             dtype=np.float32)
+
+
 @pytest.fixture(scope="module")
 def datasets(sibenik, sponza, workloads):
     sets = {}
@@ -182,11 +220,12 @@ def datasets(sibenik, sponza, workloads):
             sets[f"{scene.name}-{kind}"] = (w.rays, w.packets, scene.bvh().bounds)
     sets["random"] = tricky_random()
     sets["coherent"] = coherent_runs()
+    sets["few"] = few_buckets()
     return sets
 
 
 DATASETS = ["sibenik-primary", "sibenik-diffuse", "sibenik-shadow", "sponza-primary",
-            "sponza-diffuse", "sponza-shadow", "random", "coherent"]
+            "sponza-diffuse", "sponza-shadow", "random", "coherent", "few"]
 
 
 @pytest.fixture(scope="module")

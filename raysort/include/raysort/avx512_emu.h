@@ -280,6 +280,63 @@ RS_EMU void rs_emu_mask_storeu_epi32(void *p, rs_emu_mask16 k, rs_emu_m512i a)
             memcpy((char *)p + 4 * j, &a.i[j], 4);
 }
 
+/* VMINPS and VMAXPS under a mask: lanes in k get the operation's result (the second
+ * operand when either is NaN or both are zeros), the others src's */
+RS_EMU rs_emu_m512 rs_emu_mask_min_ps(rs_emu_m512 src, rs_emu_mask16 k, rs_emu_m512 a,
+                                      rs_emu_m512 b)
+{
+    return rs_emu_mask_blend_ps(k, src, rs_emu_min_ps(a, b));
+}
+RS_EMU rs_emu_m512 rs_emu_mask_max_ps(rs_emu_m512 src, rs_emu_mask16 k, rs_emu_m512 a,
+                                      rs_emu_m512 b)
+{
+    return rs_emu_mask_blend_ps(k, src, rs_emu_max_ps(a, b));
+}
+/* VPCMPEQD under a mask (lanes outside k compare false), VPADDD, VPSLLD by an
+ * immediate (zeros past 31), VPORD under a mask (src's lanes outside k) */
+RS_EMU rs_emu_mask16 rs_emu_mask_cmpeq_epi32_mask(rs_emu_mask16 k, rs_emu_m512i a,
+                                                  rs_emu_m512i b)
+{
+    return (rs_emu_mask16)(k & rs_emu_cmpeq_epi32_mask(a, b));
+}
+RS_EMU rs_emu_m512i rs_emu_add_epi32(rs_emu_m512i a, rs_emu_m512i b)
+{
+    rs_emu_m512i r;
+    for (int j = 0; j < 16; ++j)
+        r.i[j] = (int32_t)((uint32_t)a.i[j] + (uint32_t)b.i[j]);
+    return r;
+}
+RS_EMU rs_emu_m512i rs_emu_slli_epi32(rs_emu_m512i a, unsigned imm)
+{
+    rs_emu_m512i r;
+    for (int j = 0; j < 16; ++j)
+        r.i[j] = imm > 31 ? 0 : (int32_t)((uint32_t)a.i[j] << imm);
+    return r;
+}
+RS_EMU rs_emu_m512i rs_emu_mask_or_epi32(rs_emu_m512i src, rs_emu_mask16 k, rs_emu_m512i a,
+                                         rs_emu_m512i b)
+{
+    return rs_emu_mask_blend_epi32(k, src, rs_emu_or_si512(a, b));
+}
+/* VPMOVZXBD: sixteen bytes widened to 32-bit lanes; VPMOVDB: each lane's low byte
+ * (the emulation build has SSE2's __m128i) */
+RS_EMU rs_emu_m512i rs_emu_cvtepu8_epi32(__m128i a)
+{
+    uint8_t b[16];
+    rs_emu_m512i r;
+    _mm_storeu_si128((__m128i *)b, a);
+    for (int j = 0; j < 16; ++j)
+        r.i[j] = b[j];
+    return r;
+}
+RS_EMU __m128i rs_emu_cvtepi32_epi8(rs_emu_m512i a)
+{
+    uint8_t b[16];
+    for (int j = 0; j < 16; ++j)
+        b[j] = (uint8_t)a.i[j];
+    return _mm_loadu_si128((const __m128i *)b);
+}
+
 #undef RS_EMU
 
 /* the names the avx512 code is written with, sent here */
@@ -323,5 +380,13 @@ RS_EMU void rs_emu_mask_storeu_epi32(void *p, rs_emu_mask16 k, rs_emu_m512i a)
 #define _mm512_or_si512 rs_emu_or_si512
 #define _mm512_maskz_loadu_ps rs_emu_maskz_loadu_ps
 #define _mm512_mask_storeu_epi32 rs_emu_mask_storeu_epi32
+#define _mm512_mask_min_ps rs_emu_mask_min_ps
+#define _mm512_mask_max_ps rs_emu_mask_max_ps
+#define _mm512_mask_cmpeq_epi32_mask rs_emu_mask_cmpeq_epi32_mask
+#define _mm512_add_epi32 rs_emu_add_epi32
+#define _mm512_slli_epi32 rs_emu_slli_epi32
+#define _mm512_mask_or_epi32 rs_emu_mask_or_epi32
+#define _mm512_cvtepu8_epi32 rs_emu_cvtepu8_epi32
+#define _mm512_cvtepi32_epi8 rs_emu_cvtepi32_epi8
 
 #endif
