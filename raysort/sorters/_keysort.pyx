@@ -89,7 +89,8 @@ cdef enum:
     COUNT_SIZE = 8 << MAX_DIGIT         # histogram ints: 64 bits take at most 8 digits
 cdef enum:
     BLOCK = 256             # rays whose coordinates are computed together, loop by loop
-    IOTA_SPILL = 7          # values rs_keysort_iota may write past its end
+    IOTA_SPILL = 15         # values iota (7) and place_runs (15) may write past their end
+    RUNS_PER_RAY = 3        # sort_runs where a packet's keys come in runs of 3 rays or more
 #: widest and narrowest radix digit (bits)
 MAX_DIGIT_BITS = MAX_DIGIT
 MIN_DIGIT_BITS = MIN_DIGIT
@@ -459,6 +460,80 @@ cdef extern from *:
         return n;
     #endif
     }
+    /* The runs of equal values of k[0, n) (n >= 1): run c starts at pos[c] (and
+     * pos[runs] = n), head[c] = its value | c; returns the number of runs.  Sixteen
+     * values at a time, each vector's run starts compressed to their place, with no
+     * branch on the values (AVX-512 only: RS_KEYSORT_RUN_HEADS). */
+    #define RS_KEYSORT_RUN_HEADS RS_ISA_AVX512
+    #if RS_ISA_AVX512
+    static int rs_keysort_run_heads(const uint32_t *k, int n, int32_t *pos, uint32_t *head)
+    {
+        static const int32_t lane[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14,
+                                         15};
+        const __m512i iota = _mm512_loadu_si512((const void *)lane);
+        __m512i id = iota;
+        int r = 0;
+        for (int j = 0; j < n; j += 16) {
+            __mmask16 t = n - j >= 16 ? (__mmask16)0xFFFF : (__mmask16)((1u << (n - j)) - 1);
+            __mmask16 first = j ? (__mmask16)0 : (__mmask16)1;   /* k[-1] is not read */
+            __m512i cur = _mm512_maskz_loadu_epi32(t, k + j);
+            __m512i prev = _mm512_maskz_loadu_epi32((__mmask16)(t & ~first), k + j - 1);
+            __mmask16 h = (__mmask16)(_mm512_mask_cmpneq_epi32_mask(t, cur, prev) | first);
+            int got = rs_keysort_popcount64(h);
+            __mmask16 put = (__mmask16)((1u << got) - 1);
+            _mm512_mask_storeu_epi32(pos + r, put, _mm512_maskz_compress_epi32(h, id));
+            _mm512_mask_storeu_epi32(head + r, put, _mm512_or_si512(
+                _mm512_maskz_compress_epi32(h, cur),
+                _mm512_add_epi32(iota, _mm512_set1_epi32(r))));
+            r += got;
+            id = _mm512_add_epi32(id, _mm512_set1_epi32(16));
+        }
+        pos[r] = n;
+        return r;
+    }
+    /* The rays of sorted runs (head[j] & idx = the run, at pos[run] .. pos[run + 1]),
+     * each run's in order after the last's, to out: sixteen at a time (up to 15 values
+     * past the last), a loop only for runs longer than sixteen rays (rare: the loop a
+     * run at a time, eight at a time, missed its exit once in four runs after a trace).
+     * The positions where the top bits (split) of the sorted keys change go to group
+     * (the first at 0, then n after the last); returns their number. */
+    static int rs_keysort_place_runs(const uint32_t *head, int runs, const int32_t *pos,
+                                     uint32_t idx, uint32_t split, int32_t start,
+                                     int32_t *out, int32_t *group)
+    {
+        static const int32_t lane[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14,
+                                         15};
+        const __m512i iota = _mm512_loadu_si512((const void *)lane);
+        int at = 0, ng = 0;
+        uint32_t g = 0;
+        for (int j = 0; j < runs; ++j) {
+            uint32_t key = head[j];
+            int c = (int)(key & idx), first = pos[c], len = pos[c + 1] - first;
+            _mm512_storeu_si512((void *)(out + at),
+                                _mm512_add_epi32(iota, _mm512_set1_epi32(start + first)));
+            for (int k = 16; k < len; k += 16)
+                _mm512_storeu_si512((void *)(out + at + k),
+                                    _mm512_add_epi32(iota, _mm512_set1_epi32(start + first + k)));
+            group[ng] = at;             /* (overwritten unless a group starts here) */
+            ng += (j == 0) | ((key & split) != g);
+            g = key & split;
+            at += len;
+        }
+        group[ng] = at;
+        return ng;
+    }
+    #else
+    static int rs_keysort_run_heads(const uint32_t *k, int n, int32_t *pos, uint32_t *head)
+    {
+        return -1;
+    }
+    static int rs_keysort_place_runs(const uint32_t *head, int runs, const int32_t *pos,
+                                     uint32_t idx, uint32_t split, int32_t start,
+                                     int32_t *out, int32_t *group)
+    {
+        return -1;
+    }
+    #endif
     """
     float pick "rs_keysort_pick"(bint c, float a, float b) noexcept nogil
     void inv_sqrt "rs_keysort_inv_sqrt"(const float *x, float *out, int m) noexcept nogil
@@ -471,6 +546,12 @@ cdef extern from *:
     void ray_order "rs_keysort_ray_order"(const uint32_t *k32, int n, uint32_t idx,
                                           int32_t start, int32_t *out) noexcept nogil
     bint WINDOWS "RS_KEYSORT_WINDOWS"
+    bint RUN_HEADS "RS_KEYSORT_RUN_HEADS"
+    int run_heads "rs_keysort_run_heads"(const uint32_t *k, int n, int32_t *pos,
+                                         uint32_t *head) noexcept nogil
+    int place_runs "rs_keysort_place_runs"(const uint32_t *head, int runs, const int32_t *pos,
+                                           uint32_t idx, uint32_t split, int32_t start,
+                                           int32_t *out, int32_t *group) noexcept nogil
     int TABLE_SLOTS "RS_KEYSORT_TABLE_SLOTS"
     void window_keys "rs_keysort_window_keys"(const float *c, int stride, int m, int n_tables,
                                               const int *coord, const int *shift,
@@ -1065,6 +1146,12 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
         return cut_packets(keys, n, start, packet_size, split_bits, split_bits <= bits,
                            offsets)
     simple = packed and not compress
+    if RUN_HEADS and COMPACT_SORT and packed and RUNS_PER_RAY * runs <= n:
+        c = sort_runs(keys, n, start, (all_and ^ all_or) & mask, runs, split_bits,
+                      packet_size, order, offsets, <uint32_t *> citem,
+                      <uint32_t *> citem_tmp, cstart)
+        if c >= 0:
+            return c
     if simple and COMPACT_SORT:
         c = sort_compact(keys, n, start, (all_and ^ all_or) & mask, split_bits,
                          packet_size, order, offsets, <uint32_t *> citem)
@@ -1133,26 +1220,20 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
                          split_bits <= bits, order, offsets, skey)
 
 
-cdef int sort_compact(const uint64_t *keys, int n, int start, uint64_t vary, int split_bits,
-                      int packet_size, int32_t *order, int32_t *offsets,
-                      uint32_t *k32) noexcept nogil:
-    """:func:`sort_packet` of rays [start, start + n) with 32-bit packed keys, when
-    their bits that vary (``vary``) and the index fit in 32 bits; returns the number of
-    sub-packets, or -1 (nothing written) when they do not fit.
+cdef int compact_plan(uint64_t vary, int index_bits, int split_bits, int *top,
+                      int *bottom, int *q) noexcept nogil:
+    """Where the bits of a 32-bit compact key come from: the bits that vary between the
+    packet's keys (``vary``), in their order, at its top, ``index_bits`` below them.
+    Returns the number of runs of key bits [bottom[r], top[r]] (highest first) to
+    gather, or -1 when they do not fit; ``q`` = the compact key's top bits that hold the
+    key's top ``split_bits`` (their varying bits).
 
-    The varying bits are gathered, in their order, to the top of a uint32 (bits that
-    are the same in every key cannot change the order), the index below them: NumPy
-    sorts 32-bit keys in half the time of 64-bit ones.  A gather of each run of set
-    bits of ``vary`` would take several passes over the keys; the gaps between runs
-    (constant bits) are kept, smallest first, as long as the key still fits, which
+    Bits that are the same in every key cannot change the order; a gather of each run of
+    set bits of ``vary`` would take several passes over the keys, so the gaps between
+    runs (constant bits) are kept, smallest first, as long as the key still fits, which
     leaves the keys of a bounce's 1024-ray packet one to three runs."""
-    cdef int index_bits = 0, p, nrun = 0, j, r, i, gap, width, lowest, q
-    cdef int top[64]
-    cdef int bottom[64]
+    cdef int nrun = 0, j, r, gap, width, lowest, p
     cdef uint64_t v = vary, run, splits
-    cdef uint32_t idx
-    while (<int64_t> 1 << index_bits) < n:
-        index_bits += 1
     # the runs of set bits of vary, highest first
     while v:
         top[nrun] = 63 - clz64(v)
@@ -1160,10 +1241,9 @@ cdef int sort_compact(const uint64_t *keys, int n, int start, uint64_t vary, int
         bottom[nrun] = 0 if run == 0 else 64 - clz64(run)
         v &= ~(((<uint64_t> 2 << top[nrun]) - 1) ^ ((<uint64_t> 1 << bottom[nrun]) - 1))
         nrun += 1
-    p = popcount64(vary)
-    if p + index_bits > 32:
+    width = popcount64(vary)
+    if width + index_bits > 32:
         return -1
-    width = p
     while nrun > 1:             # join the two runs with the smallest gap, if it fits
         j = 0
         for r in range(1, nrun - 1):
@@ -1180,19 +1260,86 @@ cdef int sort_compact(const uint64_t *keys, int n, int start, uint64_t vary, int
     # the key's top split_bits: their varying bits are the compact key's top q bits
     splits = 0 if split_bits == 0 else vary & (~(<uint64_t> 0) << (64 - split_bits))
     lowest = ctz64(splits) if splits else 64
-    for i in range(n):
-        k32[i] = <uint32_t> i
     p = 32                      # the top of the next run in the compact key
-    q = 0
+    q[0] = 0
+    for r in range(nrun):
+        p -= top[r] - bottom[r] + 1
+        if bottom[r] <= lowest <= top[r]:
+            q[0] = 32 - p - (lowest - bottom[r])
+    return nrun
+
+
+cdef void compact_keys(const uint64_t *keys, int n, int nrun, const int *top,
+                       const int *bottom, uint32_t *k32) noexcept nogil:
+    """k32[i] |= the runs of bits of keys[i] that :func:`compact_plan` chose, from the top."""
+    cdef int r, p = 32
     for r in range(nrun):
         p -= top[r] - bottom[r] + 1
         gather_run(keys, n, bottom[r], top[r] - bottom[r] + 1, p, k32)
-        if bottom[r] <= lowest <= top[r]:
-            q = 32 - p - (lowest - bottom[r])
+
+
+cdef int bits_for(int n) noexcept nogil:
+    """The bits an index below n takes."""
+    cdef int b = 0
+    while (<int64_t> 1 << b) < n:
+        b += 1
+    return b
+
+
+cdef int sort_compact(const uint64_t *keys, int n, int start, uint64_t vary, int split_bits,
+                      int packet_size, int32_t *order, int32_t *offsets,
+                      uint32_t *k32) noexcept nogil:
+    """:func:`sort_packet` of rays [start, start + n) with 32-bit compact keys
+    (:func:`compact_plan`), each ray's index below its bits, when they fit; returns the
+    number of sub-packets, or -1 (nothing written) when they do not fit.  NumPy sorts
+    32-bit keys in half the time of 64-bit ones."""
+    cdef int top[64]
+    cdef int bottom[64]
+    cdef int i, q, index_bits = bits_for(n)
+    cdef int nrun = compact_plan(vary, index_bits, split_bits, top, bottom, &q)
+    if nrun < 0:
+        return -1
+    for i in range(n):
+        k32[i] = <uint32_t> i
+    compact_keys(keys, n, nrun, top, bottom, k32)
     sort_u32(k32, n, NULL)
-    idx = (<uint32_t> 1 << index_bits) - 1
-    ray_order(k32, n, idx, start, order + start)
+    ray_order(k32, n, (<uint32_t> 1 << index_bits) - 1, start, order + start)
     return cut_packets(k32, n, start, packet_size, q, True, offsets)
+
+
+cdef int sort_runs(const uint64_t *keys, int n, int start, uint64_t vary, int runs,
+                   int split_bits, int packet_size, int32_t *order, int32_t *offsets,
+                   uint32_t *k32, uint32_t *head, int32_t *pos) noexcept nogil:
+    """:func:`sort_compact` by runs of equal keys (avx512 builds: RUN_HEADS), for
+    packets whose keys come in runs (shadow rays: one run in 4 to 7 rays): each run's
+    compact key, its run number below its bits, sorted (the run number keeps the sort
+    stable), then each run's rays written in order at its place (IOTA_SPILL past).
+    ``runs`` bounds the number of runs.  Returns the number of sub-packets, or -1
+    (nothing written) when the compact keys do not fit."""
+    cdef int top[64]
+    cdef int bottom[64]
+    cdef int i, j, q, groups, n_sub = 0, index_bits = bits_for(runs)
+    cdef int nrun = compact_plan(vary, index_bits, split_bits, top, bottom, &q)
+    cdef int32_t *group = <int32_t *> k32
+    cdef uint32_t idx = (<uint32_t> 1 << index_bits) - 1
+    cdef uint32_t split = 0 if q == 0 else ~(<uint32_t> 0) << (32 - q)
+    if nrun < 0:
+        return -1
+    memset(k32, 0, n * sizeof(uint32_t))
+    compact_keys(keys, n, nrun, top, bottom, k32)
+    runs = run_heads(k32, n, pos, head)
+    sort_u32(head, runs, NULL)
+    # each run's rays at its place; a sub-packet where the top q bits change (the
+    # groups, their starts to k32, free now), and after every packet_size rays of the
+    # same top bits (cut_packets' rule)
+    groups = place_runs(head, runs, pos, idx, split, start, order + start, group)
+    for j in range(groups):
+        i = group[j]
+        while i < group[j + 1]:
+            offsets[n_sub] = start + i
+            n_sub += 1
+            i += packet_size
+    return n_sub
 
 
 cdef inline void gather_run(const uint64_t *keys, int n, int bottom, int length, int at,

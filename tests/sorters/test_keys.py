@@ -375,6 +375,34 @@ def test_sort_keys_with_runs_of_varying_bits(rng, each_isa, split_bits, sizes):
     assert np.array_equal(offsets, reference_offsets(keys[order], packets, 64, split_bits))
 
 
+@pytest.mark.parametrize("compress", [False, True])
+@pytest.mark.parametrize("packet_size,split_bits", [(64, 0), (7, 3), (64, 10), (16, 24)])
+def test_sort_keys_in_runs(rng, each_isa, compress, packet_size, split_bits):
+    """Keys in runs of equal keys, as shadow and camera rays' come (the avx512 builds
+    sort the runs, sort_runs, where a packet has a run in 3 rays or fewer): runs of 1 to
+    40 keys (around the 16 rays a run's first store writes), few or many distinct keys,
+    varying bits that fit a 32-bit key with the run number and bits that do not, runs
+    at a packet's ends, packets of 1 to 1,024 rays; the stable sort and its cuts."""
+    sizes = [1, 3, 4, 500, 1024, 0, 600, 900, 48]
+    packets = np.cumsum([0, *sizes]).astype(np.int32)
+    keys = []
+    for p, size in enumerate(sizes):
+        if p % 3 == 2:          # 64 varying bits: no compact key fits
+            values = rng.integers(0, 2**63, size=40, dtype=np.uint64) << np.uint64(1)
+        else:                   # 2 to 40 distinct keys, their varying bits in the top 24
+            values = (rng.integers(0, 1 << 24, size=2 + 19 * (p % 3), dtype=np.uint64)
+                      & rng.integers(0, 1 << 24, dtype=np.uint64)) << np.uint64(40)
+        lengths = rng.choice([1, 2, 3, 7, 15, 16, 17, 40], size=size)
+        run = np.repeat(rng.integers(0, len(values), size=size), lengths)[:size]
+        keys.append(values[run])
+    keys = np.concatenate(keys)
+    order, offsets = isa.module("sorters._keysort").sort_keys(
+        keys, packets, 3, compress=compress, packet_size=packet_size, split_bits=split_bits)
+    assert np.array_equal(order, reference_order(keys, packets, 3))
+    assert np.array_equal(offsets, reference_offsets(keys[order], packets, packet_size,
+                                                     split_bits))
+
+
 @pytest.mark.parametrize("n", [1, 5, 300, 1024, 4096])
 def test_digit_plan_covers_the_varying_bits(n, rng):
     """The radix digits span every bit from the highest to the lowest varying one, are

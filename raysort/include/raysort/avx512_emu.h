@@ -337,6 +337,24 @@ RS_EMU __m128i rs_emu_cvtepi32_epi8(rs_emu_m512i a)
     return _mm_loadu_si128((const __m128i *)b);
 }
 
+/* VMOVDQU32 with a zero mask (lanes outside k not read: zero) and VPCMPD's NEQ under
+ * a mask (lanes outside k false) */
+RS_EMU rs_emu_m512i rs_emu_maskz_loadu_epi32(rs_emu_mask16 k, const void *p)
+{
+    rs_emu_m512i r;
+    for (int j = 0; j < 16; ++j)
+        r.i[j] = 0;
+    for (int j = 0; j < 16; ++j)
+        if (k >> j & 1)
+            memcpy(&r.i[j], (const char *)p + 4 * j, 4);
+    return r;
+}
+RS_EMU rs_emu_mask16 rs_emu_mask_cmpneq_epi32_mask(rs_emu_mask16 k, rs_emu_m512i a,
+                                                   rs_emu_m512i b)
+{
+    return (rs_emu_mask16)(k & ~rs_emu_cmpeq_epi32_mask(a, b));
+}
+
 #undef RS_EMU
 
 /* the names the avx512 code is written with, sent here */
@@ -388,5 +406,7 @@ RS_EMU __m128i rs_emu_cvtepi32_epi8(rs_emu_m512i a)
 #define _mm512_mask_or_epi32 rs_emu_mask_or_epi32
 #define _mm512_cvtepu8_epi32 rs_emu_cvtepu8_epi32
 #define _mm512_cvtepi32_epi8 rs_emu_cvtepi32_epi8
+#define _mm512_maskz_loadu_epi32 rs_emu_maskz_loadu_epi32
+#define _mm512_mask_cmpneq_epi32_mask rs_emu_mask_cmpneq_epi32_mask
 
 #endif
