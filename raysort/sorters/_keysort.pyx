@@ -90,7 +90,7 @@ cdef enum:
 cdef enum:
     BLOCK = 256             # rays whose coordinates are computed together, loop by loop
     IOTA_SPILL = 15         # values iota (7) and place_runs (15) may write past their end
-    RUNS_PER_RAY = 3        # sort_runs where a packet's keys come in runs of 3 rays or more
+    RUNS_PER_RAY = 2        # sort_runs where a packet's keys come in runs of 2 rays or more
 #: widest and narrowest radix digit (bits)
 MAX_DIGIT_BITS = MAX_DIGIT
 MIN_DIGIT_BITS = MIN_DIGIT
