@@ -12,7 +12,9 @@ built against :func:`get_include`)::
   :class:`Bounce`, :class:`ShadowRays`, :class:`Counters`), and
   :class:`LibraryTraversal`, the base of a traversal answered by an outside ray
   tracer (subclasses give its scene and query; see raysort-embree);
-* **packet helpers** (:func:`fixed_packets`; :func:`identity_order`, the order
+* **packet helpers** (:func:`fixed_packets`; :func:`plain_packets`, whether a
+  kernel that checks large-packet boundaries itself may take them as they are;
+  :func:`identity_order`, the order
   of a sorter that keeps the rays' order, which the contract check knows without
   reading it), the row indices of ray batches
   and gathered packets (:class:`RayRow`, :class:`PacketRow`; prefer the named
@@ -35,7 +37,7 @@ from raysort.paths import Bounce, Paths, ShadowRays
 from raysort.plugin import Generator, Shader, Sorter, Traversal
 from raysort.rays import MAX_PACKET, Hits, PacketRow, Packets, RayBatch, RayRow
 from raysort.sdk.library import LibraryTraversal
-from raysort.sdk.packets import fixed_packets
+from raysort.sdk.packets import fixed_packets, plain_packets
 from raysort.stats import Counters
 
 
@@ -49,7 +51,7 @@ def get_include():
 __all__ = [
     "Generator", "Sorter", "Traversal", "Shader", "LibraryTraversal",
     "RayBatch", "Packets", "Hits", "Paths", "Bounce", "ShadowRays", "Counters",
-    "MAX_PACKET", "RayRow", "PacketRow", "fixed_packets", "identity_order",
+    "MAX_PACKET", "RayRow", "PacketRow", "fixed_packets", "plain_packets", "identity_order",
     "integer", "number", "boolean", "choice", "vector3",
     "check_sort", "check_hits", "before_traversal", "check_counters", "check_generated",
     "check_bounce", "check_packets", "ConfigError", "PluginContractError", "get_include",

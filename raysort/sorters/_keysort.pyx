@@ -57,7 +57,8 @@ import math
 import numpy as np
 
 from raysort import isa
-from raysort.sdk import MAX_PACKET, ConfigError, Sorter, boolean, check_packets, integer
+from raysort.sdk import (MAX_PACKET, ConfigError, Sorter, boolean, check_packets, integer,
+                         plain_packets)
 
 cdef enum:
     KEY_COORDS = 6          # most coordinates a key draws from
@@ -1582,12 +1583,21 @@ class KeySorter(Sorter):
             prev_scale=prev_scale, octant=self.octant)
 
     def sort(self, rays, packets, bounds):
-        packets = check_packets(packets, len(rays))
+        # the pipeline's packets go straight to the kernel, which checks the rest (from
+        # 0, never decreasing); check_packets names what is wrong
+        plain = plain_packets(packets, len(rays))
+        if not plain:
+            packets = check_packets(packets, len(rays))
         length, prev_t, prev_scale = self.end_length(rays, bounds)
-        return isa.module("sorters._keysort").sort_rays(
-            rays, self.coordinates, bounds, self._table, packets, self._digits, length=length,
-            prev_t=prev_t, prev_scale=prev_scale, octant=self.octant, compress=self.compress,
-            packet_size=self.packet_size, split_bits=self._split)
+        try:
+            return isa.module("sorters._keysort").sort_rays(
+                rays, self.coordinates, bounds, self._table, packets, self._digits,
+                length=length, prev_t=prev_t, prev_scale=prev_scale, octant=self.octant,
+                compress=self.compress, packet_size=self.packet_size, split_bits=self._split)
+        except ValueError:
+            if plain:
+                check_packets(packets, len(rays))
+            raise
 
 
 def _truncate(levels, bits):

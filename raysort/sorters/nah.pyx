@@ -32,7 +32,7 @@ import numpy as np
 
 from raysort import isa
 from raysort.sdk import (MAX_PACKET, ConfigError, Sorter, check_packets, fixed_packets,
-                         integer, number)
+                         integer, number, plain_packets)
 
 cdef extern from *:
     """
@@ -678,9 +678,7 @@ class NahSorter(Sorter):
         n = len(rays)
         # the pipeline's packets (int32, ending at n) go straight to the kernel, which
         # checks the rest (from 0, never decreasing); check_packets names what is wrong
-        plain = (large_packet is None and type(packets) is np.ndarray
-                 and packets.dtype == np.int32 and packets.ndim == 1 and len(packets) > 0
-                 and packets.flags.c_contiguous and packets[-1] == n)
+        plain = large_packet is None and plain_packets(packets, n)
         if not plain:
             packets = self._packets(packets, n, params)
         bounds = np.asarray(bounds, dtype=np.float32)

@@ -552,6 +552,20 @@ def test_bad_packets_are_a_config_error(rng):
         TwoPointSorter().sort(rays, np.array([0, 20], np.int32), BOX)
 
 
+@pytest.mark.parametrize("name", KEY_SORTERS)
+@pytest.mark.parametrize("packets, message", [
+    ([5, 40, 100], "must start at 0"),
+    ([0, 60, 30, 100], "must not decrease"),
+])
+def test_bad_plain_packets_name_the_packets(name, packets, message, rng):
+    """int32 packets that end at n (the pipeline's kind, which the key sorters hand their
+    kernel unchecked: raysort.sdk.plain_packets) but start elsewhere or go back:
+    ConfigError saying so."""
+    rays = random_rays(rng, 100, BOX)
+    with pytest.raises(ConfigError, match=message):
+        raysort.create("sorters", name).sort(rays, np.array(packets, np.int32), BOX)
+
+
 # -- the previous hit distance ------------------------------------------------------
 
 def test_bounce_rays_carry_the_previous_hit_distance(sibenik):
