@@ -255,6 +255,7 @@ cdef extern from *:
      * bound's sign may differ, which no cell test sees), the same comparisons for the
      * cells, each key's rays written in ray order. */
     #define RS_NAH_FEW 8
+    #define RS_NAH_SPILL 8      /* values few_place may write past a packet's order */
     static void rs_nah_identity(int start, int n, int32_t *order)   /* one key */
     {
         int32_t *out = order + start;
@@ -263,6 +264,8 @@ cdef extern from *:
     }
     #if RS_ISA_AVX512
     #define RS_NAH_VECTOR 1
+    #define RS_NAH_TABLE_CELLS 1
+    static void rs_nah_init(void) {}
     static inline __mmask16 rs_nah_lanes(int j, int n)    /* rays j.. of n, at most 16 */
     {
         return n - j >= 16 ? (__mmask16)0xFFFF : (__mmask16)((1u << (n - j)) - 1);
@@ -313,8 +316,11 @@ cdef extern from *:
      * by its bucket in 32-entry tables.  Writes up to 15 keys past n (into the key
      * buffer's slack). */
     static void rs_nah_vector_cells(const float *const o[3], int start, uint8_t *key, int n,
-                                    const uint8_t *axes, const float (*mid)[3], int buckets)
+                                    const uint8_t *axes, const float (*mid)[3],
+                                    uint32_t present)
     {
+        const int buckets = 24;
+        (void)present;
         float m[3][32];
         int32_t bit[3][32];
         __m512 mlo[3], mhi[3];
@@ -378,13 +384,129 @@ cdef extern from *:
             out = at;
         }
     }
+    #elif RS_ISA_AVX2
+    /* The avx2 build's forms, eight rays at a time: masks are vectors (blends for the
+     * masked min and max: MINPS's operands as above), the cells a present bucket at a
+     * time (so only for packets of few buckets: no 32-entry tables in AVX2), and a
+     * key's rays compressed by a permutation looked up by the mask (writing up to 7
+     * values past its last: the order has room, RS_NAH_SPILL). */
+    #define RS_NAH_VECTOR 1
+    #define RS_NAH_TABLE_CELLS 0
+    static inline __m256i rs_nah_lanes8(int j, int n)     /* rays j.. of n, at most 8 */
+    {
+        return _mm256_cmpgt_epi32(_mm256_set1_epi32(n - j),
+                                  _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+    }
+    static inline __m256i rs_nah_keys8(const uint8_t *key)    /* eight keys, widened */
+    {
+        return _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)key));
+    }
+    static void rs_nah_few_bounds(const float *const o[3], int start, const uint8_t *key,
+                                  int n, uint32_t present, float (*lo)[3], float (*hi)[3])
+    {
+        float tl[8], th[8];
+        for (; present; present &= present - 1) {
+            int b = rs_lowest((int)present);
+            const __m256i kb = _mm256_set1_epi32(b);
+            for (int a = 0; a < 3; ++a) {
+                const float *x = o[a] + start;
+                __m256 l = _mm256_set1_ps(INFINITY), h = _mm256_set1_ps(-INFINITY);
+                for (int j = 0; j < n; j += 8) {
+                    __m256i t = rs_nah_lanes8(j, n);
+                    __m256 m = _mm256_castsi256_ps(
+                        _mm256_and_si256(t, _mm256_cmpeq_epi32(rs_nah_keys8(key + j), kb)));
+                    __m256 v = _mm256_maskload_ps(x + j, t);
+                    l = _mm256_blendv_ps(l, _mm256_min_ps(v, l), m);
+                    h = _mm256_blendv_ps(h, _mm256_max_ps(v, h), m);
+                }
+                _mm256_storeu_ps(tl, l);
+                _mm256_storeu_ps(th, h);
+                for (int k = 0; k < 8; ++k) {
+                    lo[b][a] = rs_minf(tl[k], lo[b][a]);
+                    hi[b][a] = rs_maxf(th[k], hi[b][a]);
+                }
+            }
+        }
+    }
+    static void rs_nah_vector_cells(const float *const o[3], int start, uint8_t *key, int n,
+                                    const uint8_t *axes, const float (*mid)[3],
+                                    uint32_t present)
+    {
+        for (int j = 0; j < n; j += 8) {
+            __m256i t = rs_nah_lanes8(j, n);
+            __m256i kv = rs_nah_keys8(key + j);
+            __m256 v[3];
+            for (int a = 0; a < 3; ++a)
+                v[a] = _mm256_maskload_ps(o[a] + start + j, t);
+            __m256i out = _mm256_slli_epi32(kv, 3);
+            for (uint32_t p = present; p; p &= p - 1) {
+                int b = rs_lowest((int)p);
+                int s0 = axes[b] & 1, s1 = axes[b] >> 1 & 1, s2 = axes[b] >> 2 & 1;
+                int bit[3] = {s0, s1 << s0, s2 << (s0 + s1)};
+                __m256i cell = _mm256_setzero_si256();
+                for (int a = 0; a < 3; ++a) {
+                    __m256i ge = _mm256_castps_si256(
+                        _mm256_cmp_ps(v[a], _mm256_set1_ps(mid[b][a]), _CMP_GE_OQ));
+                    cell = _mm256_or_si256(cell, _mm256_and_si256(ge, _mm256_set1_epi32(bit[a])));
+                }
+                out = _mm256_or_si256(out, _mm256_and_si256(
+                    cell, _mm256_cmpeq_epi32(kv, _mm256_set1_epi32(b))));
+            }
+            /* the low byte of each lane, to eight key bytes (and 8 past n: slack) */
+            __m256i bytes = _mm256_shuffle_epi8(out, _mm256_setr_epi8(
+                0, 4, 8, 12, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1,
+                0, 4, 8, 12, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1));
+            uint32_t lo4 = (uint32_t)_mm256_extract_epi32(bytes, 0);
+            uint32_t hi4 = (uint32_t)_mm256_extract_epi32(bytes, 4);
+            memcpy(key + j, &lo4, 4);
+            memcpy(key + j + 4, &hi4, 4);
+        }
+    }
+    /* lane indices of each 8-bit mask's set lanes, in order (then zeros) */
+    static int32_t rs_nah_compress8[256][8];
+    static void rs_nah_init(void)       /* (at import) */
+    {
+        for (int m = 0; m < 256; ++m) {
+            int c = 0;
+            for (int l = 0; l < 8; ++l)
+                if (m >> l & 1)
+                    rs_nah_compress8[m][c++] = l;
+            for (; c < 8; ++c)
+                rs_nah_compress8[m][c] = 0;
+        }
+    }
+    static void rs_nah_few_place(const uint8_t *key, int start, int n, const int *keys,
+                                 int n_keys, int *count, int32_t *order)
+    {
+        const __m256i first = _mm256_add_epi32(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+                                               _mm256_set1_epi32(start));
+        int32_t *out = order + start;
+        for (int c = 0; c < n_keys; ++c) {
+            const __m256i kc = _mm256_set1_epi32(keys[c]);
+            __m256i id = first;
+            int32_t *at = out;
+            for (int j = 0; j < n; j += 8) {
+                __m256i m = _mm256_and_si256(rs_nah_lanes8(j, n),
+                                             _mm256_cmpeq_epi32(rs_nah_keys8(key + j), kc));
+                int bits = _mm256_movemask_ps(_mm256_castsi256_ps(m));
+                __m256i perm = _mm256_loadu_si256((const __m256i *)rs_nah_compress8[bits]);
+                _mm256_storeu_si256((__m256i *)at, _mm256_permutevar8x32_epi32(id, perm));
+                at += rs_popcount(bits);
+                id = _mm256_add_epi32(id, _mm256_set1_epi32(8));
+            }
+            count[keys[c]] = (int)(at - out);
+            out = at;
+        }
+    }
     #else
     #define RS_NAH_VECTOR 0
+    #define RS_NAH_TABLE_CELLS 0
+    static void rs_nah_init(void) {}
     static void rs_nah_few_bounds(const float *const o[3], int start, const uint8_t *key,
                                   int n, uint32_t present, float (*lo)[3], float (*hi)[3]) {}
     static void rs_nah_vector_cells(const float *const o[3], int start, uint8_t *key, int n,
                                     const uint8_t *axes, const float (*mid)[3],
-                                    int buckets) {}
+                                    uint32_t present) {}
     static void rs_nah_few_place(const uint8_t *key, int start, int n, const int *keys,
                                  int n_keys, int *count, int32_t *order) {}
     #endif
@@ -416,11 +538,17 @@ cdef extern from *:
                                         float (*hi)[3]) noexcept nogil
     void vector_cells "rs_nah_vector_cells"(const float *const *o, int start, uint8_t *key,
                                             int n, const uint8_t *axes, const float (*mid)[3],
-                                            int buckets) noexcept nogil
+                                            uint32_t present) noexcept nogil
+    bint TABLE_CELLS "RS_NAH_TABLE_CELLS"
+    int SPILL "RS_NAH_SPILL"
+    void nah_init "rs_nah_init"() noexcept nogil
     void few_place "rs_nah_few_place"(const uint8_t *key, int start, int n, const int *keys,
                                       int n_keys, int *count, int32_t *order) noexcept nogil
     int popcount "rs_popcount"(int bits) noexcept nogil
     void identity "rs_nah_identity"(int start, int n, int32_t *order) noexcept nogil
+
+
+nah_init()
 
 
 cdef enum:
@@ -498,10 +626,13 @@ cdef int sort_packet(const float[:, ::1] rays, int start, int end, const float *
     buckets(&rays[RS_RAY_DX, start], &rays[RS_RAY_DY, start], &rays[RS_RAY_DZ, start], n, key)
     present = present_buckets(key, n)
     few = VECTOR and bucket_out == NULL and popcount(<int> present) <= FEW
-    if few:
+    # (the avx2 build's boxes of few buckets, a pass per axis, cost more than the run
+    # pass where runs are long: camera rays, 1.15x the sort)
+    if not (few and TABLE_CELLS):
+        runs = n >= LONG_RUNS * (changes(key, n) + 1)
+    if few and (TABLE_CELLS or not runs):
         few_bounds(origin, start, key, n, present, lo, hi)
     else:
-        runs = n >= LONG_RUNS * (changes(key, n) + 1)
         if runs:
             run_bounds(origin, start, key, n, lo, hi)
         else:
@@ -517,8 +648,8 @@ cdef int sort_packet(const float[:, ::1] rays, int start, int end, const float *
     if split == 0 and bucket_out == NULL:
         for i in range(n):
             key[i] = key[i] * 8
-    elif VECTOR and bucket_out == NULL:
-        vector_cells(origin, start, key, n, axes, mid, BUCKETS)
+    elif VECTOR and bucket_out == NULL and (few or TABLE_CELLS):
+        vector_cells(origin, start, key, n, axes, mid, present)
     elif runs and bucket_out == NULL:
         run_cells(origin, start, key, n, axes, mid)
     else:
@@ -683,7 +814,7 @@ class NahSorter(Sorter):
             packets = self._packets(packets, n, params)
         bounds = np.asarray(bounds, dtype=np.float32)
         extent = np.ascontiguousarray(bounds[1] - bounds[0], dtype=np.float32)
-        order = np.empty(max(n, 1), dtype=np.int32)
+        order = np.empty(n + SPILL, dtype=np.int32)     # (room for few_place past n)
         offsets = np.empty(n + 1, dtype=np.int32)
         try:
             n_sub = isa.module("sorters.nah")._sort(
