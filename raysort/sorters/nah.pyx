@@ -15,7 +15,11 @@ Camera rays, and shadow rays toward a light, come in long runs of one bucket:
 where a large packet's buckets average ``LONG_RUNS`` rays or more per run, the
 origin bounds, the cells and the counting sort go a run at a time (a vector
 min and max over the run's origins, one piece of the order per run) instead
-of ray by ray, with the same result.
+of ray by ray, with the same result.  Where a large packet holds at most
+``RS_NAH_FEW`` buckets (shadow rays toward a light; also where they alternate between
+buckets ray by ray), the avx512 and avx2 builds go a bucket, then a (bucket, cell) key,
+at a time over the whole packet, a vector of rays at a time under a mask, with no
+branch on the rays; the avx512 build finds every packet's cells a vector at a time.
 
 Rays with NaN components land in a defined bucket and cell (comparisons with
 NaN are false), so the sorter never fails on them; the gather marks them
@@ -621,8 +625,8 @@ cdef int sort_packet(const float[:, ::1] rays, int start, int end, const float *
     for a in range(3):
         origin[a] = &rays[RS_RAY_OX + a, 0]
     # pass 1: direction buckets (indices only) and per-bucket origin bounds: a bucket at
-    # a time where the packet has few (avx512), by runs of one bucket where they are long
-    # (coherent rays), else ray by ray
+    # a time where the packet has few (avx512, avx2), by runs of one bucket where they are
+    # long (coherent rays), else ray by ray
     buckets(&rays[RS_RAY_DX, start], &rays[RS_RAY_DY, start], &rays[RS_RAY_DZ, start], n, key)
     present = present_buckets(key, n)
     few = VECTOR and bucket_out == NULL and popcount(<int> present) <= FEW
