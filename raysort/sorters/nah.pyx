@@ -259,7 +259,6 @@ cdef extern from *:
      * bound's sign may differ, which no cell test sees), the same comparisons for the
      * cells, each key's rays written in ray order. */
     #define RS_NAH_FEW 8
-    #define RS_NAH_SPILL 8      /* values few_place may write past a packet's order */
     static void rs_nah_identity(int start, int n, int32_t *order)   /* one key */
     {
         int32_t *out = order + start;
@@ -269,7 +268,6 @@ cdef extern from *:
     #if RS_ISA_AVX512
     #define RS_NAH_VECTOR 1
     #define RS_NAH_TABLE_CELLS 1
-    static void rs_nah_init(void) {}
     static inline __mmask16 rs_nah_lanes(int j, int n)    /* rays j.. of n, at most 16 */
     {
         return n - j >= 16 ? (__mmask16)0xFFFF : (__mmask16)((1u << (n - j)) - 1);
@@ -359,41 +357,18 @@ cdef extern from *:
             _mm_storeu_si128((__m128i *)(key + j), _mm512_cvtepi32_epi8(cell));
         }
     }
-    /* The counting sort for few keys (keys[0, n_keys), ascending): each key's rays,
-     * in ray order, compressed sixteen at a time to their place after the last key's;
-     * count[k] = the rays of key k. */
-    static void rs_nah_few_place(const uint8_t *key, int start, int n, const int *keys,
-                                 int n_keys, int *count, int32_t *order)
+    static inline __m512i rs_nah_ids(int first)      /* first, first + 1, ... */
     {
-        static const int32_t iota[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14,
+        static const int32_t lane[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14,
                                          15};
-        const __m512i first = _mm512_add_epi32(_mm512_loadu_si512((const void *)iota),
-                                               _mm512_set1_epi32(start));
-        const __m512i step = _mm512_set1_epi32(16);
-        int32_t *out = order + start;
-        for (int c = 0; c < n_keys; ++c) {
-            const __m512i kc = _mm512_set1_epi32(keys[c]);
-            __m512i id = first;
-            int32_t *at = out;
-            for (int j = 0; j < n; j += 16) {
-                __mmask16 m = _mm512_mask_cmpeq_epi32_mask(rs_nah_lanes(j, n),
-                                                           rs_nah_keys16(key + j), kc);
-                int got = rs_popcount(m);
-                _mm512_mask_storeu_epi32(at, (__mmask16)((1u << got) - 1),
-                                         _mm512_maskz_compress_epi32(m, id));
-                at += got;
-                id = _mm512_add_epi32(id, step);
-            }
-            count[keys[c]] = (int)(at - out);
-            out = at;
-        }
+        return _mm512_add_epi32(_mm512_loadu_si512((const void *)lane),
+                                _mm512_set1_epi32(first));
     }
+    #define rs_nah_keys_sw rs_nah_keys16
     #elif RS_ISA_AVX2
     /* The avx2 build's forms, eight rays at a time: masks are vectors (blends for the
-     * masked min and max: MINPS's operands as above), the cells a present bucket at a
-     * time (so only for packets of few buckets: no 32-entry tables in AVX2), and a
-     * key's rays compressed by a permutation looked up by the mask (writing up to 7
-     * values past its last: the order has room, RS_NAH_SPILL). */
+     * masked min and max: MINPS's operands as above), and the cells a present bucket at
+     * a time (so only for packets of few buckets: no 32-entry tables in AVX2). */
     #define RS_NAH_VECTOR 1
     #define RS_NAH_TABLE_CELLS 0
     static inline __m256i rs_nah_lanes8(int j, int n)     /* rays j.. of n, at most 8 */
@@ -466,51 +441,46 @@ cdef extern from *:
             memcpy(key + j + 4, &hi4, 4);
         }
     }
-    /* lane indices of each 8-bit mask's set lanes, in order (then zeros) */
-    static int32_t rs_nah_compress8[256][8];
-    static void rs_nah_init(void)       /* (at import) */
+    static inline __m256i rs_nah_ids(int first)      /* first, first + 1, ... */
     {
-        for (int m = 0; m < 256; ++m) {
-            int c = 0;
-            for (int l = 0; l < 8; ++l)
-                if (m >> l & 1)
-                    rs_nah_compress8[m][c++] = l;
-            for (; c < 8; ++c)
-                rs_nah_compress8[m][c] = 0;
-        }
+        return _mm256_add_epi32(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+                                _mm256_set1_epi32(first));
     }
-    static void rs_nah_few_place(const uint8_t *key, int start, int n, const int *keys,
-                                 int n_keys, int *count, int32_t *order)
-    {
-        const __m256i first = _mm256_add_epi32(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
-                                               _mm256_set1_epi32(start));
-        int32_t *out = order + start;
-        for (int c = 0; c < n_keys; ++c) {
-            const __m256i kc = _mm256_set1_epi32(keys[c]);
-            __m256i id = first;
-            int32_t *at = out;
-            for (int j = 0; j < n; j += 8) {
-                __m256i m = _mm256_and_si256(rs_nah_lanes8(j, n),
-                                             _mm256_cmpeq_epi32(rs_nah_keys8(key + j), kc));
-                int bits = _mm256_movemask_ps(_mm256_castsi256_ps(m));
-                __m256i perm = _mm256_loadu_si256((const __m256i *)rs_nah_compress8[bits]);
-                _mm256_storeu_si256((__m256i *)at, _mm256_permutevar8x32_epi32(id, perm));
-                at += rs_popcount(bits);
-                id = _mm256_add_epi32(id, _mm256_set1_epi32(8));
-            }
-            count[keys[c]] = (int)(at - out);
-            out = at;
-        }
-    }
+    #define rs_nah_keys_sw rs_nah_keys8
     #else
     #define RS_NAH_VECTOR 0
     #define RS_NAH_TABLE_CELLS 0
-    static void rs_nah_init(void) {}
     static void rs_nah_few_bounds(const float *const o[3], int start, const uint8_t *key,
                                   int n, uint32_t present, float (*lo)[3], float (*hi)[3]) {}
     static void rs_nah_vector_cells(const float *const o[3], int start, uint8_t *key, int n,
                                     const uint8_t *axes, const float (*mid)[3],
                                     uint32_t present) {}
+    #endif
+    /* The counting sort for few keys (keys[0, n_keys), ascending): each key's rays, in
+     * ray order, a vector of keys at a time, their indices appended (lanes.h's
+     * sw_append: a compress, or a permutation looked up by the mask) after the last
+     * key's, up to RS_SW - 1 values past the packet's last (the order has RS_NAH_SPILL
+     * values of room past its end); count[k] = the rays of key k. */
+    #define RS_NAH_SPILL 16      /* every build's (the Python wrapper allocates the order) */
+    #if RS_NAH_VECTOR
+    static void rs_nah_few_place(const uint8_t *key, int start, int n, const int *keys,
+                                 int n_keys, int *count, int32_t *order)
+    {
+        int32_t *out = order + start;
+        int placed = 0;
+        for (int c = 0; c < n_keys; ++c) {
+            const rs_swi kc = sw_set1i(keys[c]);
+            int before = placed;
+            for (int j = 0; j < n; j += RS_SW) {
+                int bits = sw_eqi_bits(rs_nah_keys_sw(key + j), kc);
+                if (n - j < RS_SW)          /* (the last vector: keys past n are slack) */
+                    bits &= (1 << (n - j)) - 1;
+                sw_append(out, &placed, rs_nah_ids(start + j), bits);
+            }
+            count[keys[c]] = placed - before;
+        }
+    }
+    #else
     static void rs_nah_few_place(const uint8_t *key, int start, int n, const int *keys,
                                  int n_keys, int *count, int32_t *order) {}
     #endif
@@ -545,14 +515,10 @@ cdef extern from *:
                                             uint32_t present) noexcept nogil
     bint TABLE_CELLS "RS_NAH_TABLE_CELLS"
     int SPILL "RS_NAH_SPILL"
-    void nah_init "rs_nah_init"() noexcept nogil
     void few_place "rs_nah_few_place"(const uint8_t *key, int start, int n, const int *keys,
                                       int n_keys, int *count, int32_t *order) noexcept nogil
     int popcount "rs_popcount"(int bits) noexcept nogil
     void identity "rs_nah_identity"(int start, int n, int32_t *order) noexcept nogil
-
-
-nah_init()
 
 
 cdef enum:
@@ -720,8 +686,9 @@ def _sort(const float[:, ::1] rays, const int32_t[::1] packets, const float[::1]
           uint8_t[::1] bucket_out=None, uint8_t[::1] cell_out=None):
     """Sort every large packet; returns the number of sub-packets (offsets gets them + end).
     ValueError unless ``packets`` ascend from 0 (checked in the pass that finds the widest)
-    to an n that ``rays``, ``order``, ``offsets`` (n + 1), ``bucket_out`` and ``cell_out``
-    hold, ``root_extent`` has 3 values and ``packet_size`` >= 1."""
+    to an n that ``rays``, ``order`` (n + ``SPILL``: the few-key pass may write past n),
+    ``offsets`` (n + 1), ``bucket_out`` and ``cell_out`` hold, ``root_extent`` has 3 values
+    and ``packet_size`` >= 1."""
     cdef int p, n_sub = 0, widest = 0, descending = 0
     cdef Py_ssize_t n
     if packets.shape[0] < 1 or root_extent.shape[0] < 3 or packet_size < 1 \
@@ -729,11 +696,12 @@ def _sort(const float[:, ::1] rays, const int32_t[::1] packets, const float[::1]
         raise ValueError("_sort: rays (RS_RAY_ROWS, capacity), packets of 1 boundary or more, "
                          "root_extent of 3 values and packet_size >= 1 expected")
     n = packets[packets.shape[0] - 1]
-    if (packets[0] != 0 or n > rays.shape[1] or n > order.shape[0] or n >= offsets.shape[0]
+    if (packets[0] != 0 or n > rays.shape[1] or n + SPILL > order.shape[0]
+            or n >= offsets.shape[0]
             or (bucket_out is not None and bucket_out.shape[0] < n)
             or (cell_out is not None and cell_out.shape[0] < n)):
-        raise ValueError(f"_sort: packets must run from 0 to n = {n}, and rays, order, "
-                         f"offsets (n + 1), bucket_out and cell_out hold them")
+        raise ValueError(f"_sort: packets must run from 0 to n = {n}, and rays, order "
+                         f"(n + {SPILL}), offsets (n + 1), bucket_out and cell_out hold them")
     for p in range(packets.shape[0] - 1):
         widest = max(widest, packets[p + 1] - packets[p])
         descending |= packets[p + 1] < packets[p]

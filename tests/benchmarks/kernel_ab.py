@@ -79,7 +79,11 @@ class TimedModule:
 
 def load_copy(name, path):
     """The extension module in ``path`` (a copy of a build of ``name``), under a name of
-    its own."""
+    its own.  The package's own module of that name is imported first: a Cython module
+    puts itself in ``sys.modules`` under its compiled name when that name is free, and
+    the copy's Python classes (a sorter's wrapper, which may differ between the builds)
+    would then stand in for the package's."""
+    importlib.import_module("raysort." + name)
     alias = "raysort_kernel_ab_old." + name.rsplit(".", 1)[-1]
     loader = importlib.machinery.ExtensionFileLoader(alias, path)
     module = importlib.util.module_from_spec(importlib.util.spec_from_loader(alias, loader))
@@ -163,8 +167,9 @@ def main(argv=None):
     parser.add_argument("--traversal", default=None,
                         help="the pipeline's traversal (its default)")
     args = parser.parse_args(argv)
+    new = isa.module(args.module)
     builds = {"old": TimedModule(load_copy(args.module, args.old), args.function),
-              "new": TimedModule(isa.module(args.module), args.function)}
+              "new": TimedModule(new, args.function)}
     if args.rays:
         return trace_rounds(args, builds)
     pipe = raysort.Pipeline(args.scene, threads=args.threads, sorter=args.sorter,

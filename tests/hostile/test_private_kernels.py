@@ -79,7 +79,8 @@ def ao_args(n=16, **edit):
 def nah_args(n=64, **edit):
     args = dict(rays=rays(n).data, packets=np.array([0, n], np.int32),
                 root_extent=np.ones(3, np.float32), threshold=0.25, max_axes=3,
-                packet_size=64, order=np.zeros(n, np.int32), offsets=np.zeros(n + 1, np.int32))
+                packet_size=64, order=np.zeros(n + 16, np.int32),
+                offsets=np.zeros(n + 1, np.int32))
     args.update(edit)
     return args
 def cyclic8():
@@ -234,6 +235,9 @@ PER_ISA = {
     "nah with descending packets": ("""
         K("sorters.nah")._sort(**nah_args(64, packets=np.array([0, 50, 20, 64], np.int32)))
         """, "_sort: packets must not descend"),
+    "nah with an order without room past n": ("""
+        K("sorters.nah")._sort(**nah_args(64, order=np.zeros(64, np.int32)))
+        """, "_sort: packets"),
     "lambert's _shade with t shorter than prim": ("""
         K("shaders.lambert")._shade(**shade_args(16, t=np.ones(2, np.float32)))
         """, "_shade: "),
