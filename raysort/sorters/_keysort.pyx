@@ -467,11 +467,11 @@ cdef extern from *:
      * branch on the values (AVX-512 only: RS_KEYSORT_RUN_HEADS). */
     #define RS_KEYSORT_RUN_HEADS RS_ISA_AVX512
     #if RS_ISA_AVX512
+    static const int32_t rs_keysort_lane16[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12,
+                                                  13, 14, 15};
     static int rs_keysort_run_heads(const uint32_t *k, int n, int32_t *pos, uint32_t *head)
     {
-        static const int32_t lane[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14,
-                                         15};
-        const __m512i iota = _mm512_loadu_si512((const void *)lane);
+        const __m512i iota = _mm512_loadu_si512((const void *)rs_keysort_lane16);
         __m512i id = iota;
         int r = 0;
         for (int j = 0; j < n; j += 16) {
@@ -502,9 +502,7 @@ cdef extern from *:
                                      uint32_t idx, uint32_t split, int32_t start,
                                      int32_t *out, int32_t *group)
     {
-        static const int32_t lane[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14,
-                                         15};
-        const __m512i iota = _mm512_loadu_si512((const void *)lane);
+        const __m512i iota = _mm512_loadu_si512((const void *)rs_keysort_lane16);
         int at = 0, ng = 0;
         uint32_t g = 0;
         for (int j = 0; j < runs; ++j) {
