@@ -246,19 +246,29 @@ cdef extern from *:
         for (int i = start; i < end; ++i)
             order[at[key[i - start]]++] = i;
     }
-    /* The few-key passes (avx512 builds).  Shadow rays toward a light fill few
+    /* The few-key passes (avx512 and avx2 builds).  Shadow rays toward a light fill few
      * direction buckets of a packet (Sibenik's: two in half the packets, at most seven),
      * but where a packet straddles a bucket's border they alternate between buckets ray
      * by ray: the run passes above then go ray by ray, each ray's box update a chain
      * through memory, and each run's end is a branch a trace leaves unlearnt.  Where a
-     * packet holds at most RS_NAH_FEW buckets (and keys), the avx512 build reads the
-     * whole packet once per bucket (key), sixteen rays at a time under a mask of its
-     * rays, with no branch on the rays; and the cells of any packet sixteen at a time.
+     * packet holds at most RS_NAH_FEW buckets (and keys), the sort reads the whole
+     * packet once per bucket (key), a vector of rays at a time under a mask of its
+     * rays, with no branch on the rays (the avx512 build: the cells of any packet
+     * sixteen at a time).
      * Results equal the ray-by-ray passes': min and max taken in another order (the
      * same values: NaN skipped, as MINPS returns the second operand; only a zero
      * bound's sign may differ, which no cell test sees), the same comparisons for the
      * cells, each key's rays written in ray order. */
     #define RS_NAH_FEW 8
+    /* The cell bit of each axis in a bucket's grid (grid_cell's numbering: one bit per
+     * split axis, in axis order; 0 for an axis not split). */
+    static inline void rs_nah_cell_bits(uint8_t axes, int32_t bit[3])
+    {
+        int s0 = axes & 1, s1 = axes >> 1 & 1, s2 = axes >> 2 & 1;
+        bit[0] = s0;
+        bit[1] = s1 << s0;
+        bit[2] = s2 << (s0 + s1);
+    }
     static void rs_nah_identity(int start, int n, int32_t *order)   /* one key */
     {
         int32_t *out = order + start;
@@ -330,12 +340,12 @@ cdef extern from *:
         memset(m, 0, sizeof m);
         memset(bit, 0, sizeof bit);
         for (int b = 0; b < buckets; ++b) {
-            int s0 = axes[b] & 1, s1 = axes[b] >> 1 & 1, s2 = axes[b] >> 2 & 1;
-            bit[0][b] = s0;
-            bit[1][b] = s1 << s0;
-            bit[2][b] = s2 << (s0 + s1);
-            for (int a = 0; a < 3; ++a)
+            int32_t cb[3];
+            rs_nah_cell_bits(axes[b], cb);
+            for (int a = 0; a < 3; ++a) {
+                bit[a][b] = cb[a];
                 m[a][b] = mid[b][a];
+            }
         }
         for (int a = 0; a < 3; ++a) {
             mlo[a] = _mm512_loadu_ps(m[a]);
@@ -420,8 +430,8 @@ cdef extern from *:
             __m256i out = _mm256_slli_epi32(kv, 3);
             for (uint32_t p = present; p; p &= p - 1) {
                 int b = rs_lowest((int)p);
-                int s0 = axes[b] & 1, s1 = axes[b] >> 1 & 1, s2 = axes[b] >> 2 & 1;
-                int bit[3] = {s0, s1 << s0, s2 << (s0 + s1)};
+                int32_t bit[3];
+                rs_nah_cell_bits(axes[b], bit);
                 __m256i cell = _mm256_setzero_si256();
                 for (int a = 0; a < 3; ++a) {
                     __m256i ge = _mm256_castps_si256(
