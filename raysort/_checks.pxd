@@ -99,17 +99,28 @@ cdef inline int32_t checked_ray(int32_t j, int32_t lo, int32_t hi, int32_t n, ui
 
 cdef inline int rays_bad(const int32_t *order, Py_ssize_t a, Py_ssize_t b, int32_t lo,
                          int32_t hi, uint8_t *seen) noexcept nogil:
-    """Any of ``order[a:b]`` outside ``[lo, hi)`` or seen before (``seen``: a byte per
-    ray, set here).  The range first (:func:`range_bad`, a loop the compiler
-    vectorises), then a load and a store per ray, rays known to be inside."""
+    """Any of ``order[a:b]`` outside ``[lo, hi)``; marks each (``seen``: a byte per ray,
+    set here).  The range first (:func:`range_bad`, a loop the compiler vectorises),
+    then a store per ray, rays known to be inside.  A ray seen twice is not tested
+    here: n positions whose rays all lie in ``[0, n)`` hold each ray once exactly when
+    every ray is marked (:func:`all_marked`).  The stores alone, without a load of the
+    byte each one writes, took 0.85-0.90x the whole check's time (shadow rays' orders
+    of ``two_point`` and ``nah``, AVX-512)."""
     cdef Py_ssize_t i
-    cdef int bad = 0
     if range_bad(order, a, b, lo, hi):
         return 1
     for i in range(a, b):
-        bad |= seen[order[i]]
         seen[order[i]] = 1
-    return bad
+    return 0
+
+
+cdef inline int all_marked(const uint8_t *seen, Py_ssize_t n) noexcept nogil:
+    """Whether ``seen[0:n]`` are all 1 (a loop the compiler vectorises)."""
+    cdef Py_ssize_t i
+    cdef uint8_t every = 1
+    for i in range(n):
+        every &= seen[i]
+    return every
 
 
 cdef inline int sub_packet_bad(const int32_t *order, Py_ssize_t a, Py_ssize_t b,

@@ -16,8 +16,8 @@ from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t, uint64_t
 from libc.stdlib cimport calloc, free
 from libc.string cimport memcmp, memset
 from raysort._checks cimport (ray_bad, closest_bad, any_hit_bad, large_packet,
-                              packet_bounds, slot_bad, sub_packet_bad, rays_bad, offsets_bad,
-                              nonfinite, parents_weights_bad, slots_bad)
+                              packet_bounds, slot_bad, sub_packet_bad, rays_bad, all_marked,
+                              offsets_bad, nonfinite, parents_weights_bad, slots_bad)
 from raysort._types cimport (RS_RAY_OX, RS_RAY_OY, RS_RAY_OZ, RS_RAY_DX, RS_RAY_DY, RS_RAY_DZ,
                              RS_RAY_TMIN, RS_RAY_TMAX, RS_RAY_ROWS, RS_PACKET_ROWS,
                              RS_PACKET_TMIN, RS_PACKET_T)
@@ -92,10 +92,11 @@ cdef int runs_bad(const int32_t *order, const int32_t *offsets, Py_ssize_t n_sub
     """Non-zero if the rays of a sort result whose offsets are valid (:func:`offsets_bad`
     passed) break its contract, checked a run of sub-packets at a time: consecutive
     sub-packets whose first rays lie in one large packet form a run, whose rays must all
-    lie in that packet and each be seen for the first time, the rules of
-    :func:`sub_packet_bad` for each of its sub-packets (each starts in the run's
-    packet).  One loop per large packet, as sorters cut them, instead of one per
-    sub-packet; :func:`sort_kernel` says what is wrong."""
+    lie in that packet, the rules of :func:`sub_packet_bad` for each of its sub-packets
+    (each starts in the run's packet) but that of repeats: each ray is marked in
+    ``seen``, and the order holds every ray once when :func:`all_marked` then holds.  One
+    loop per large packet, as sorters cut them, instead of one per sub-packet;
+    :func:`sort_kernel` says what is wrong."""
     cdef Py_ssize_t k, k_big = 0, run = 0
     cdef int64_t a
     cdef int32_t lo = 0, hi = 0, first
@@ -153,7 +154,7 @@ cdef int sort_kernel(const int32_t *order, const int32_t *offsets, Py_ssize_t n_
         if identity:
             if not identity_cuts_bad(offsets, n_sub, packets, n_big, n):
                 return 0
-        elif not runs_bad(order, offsets, n_sub, packets, n_big, n, seen):
+        elif not runs_bad(order, offsets, n_sub, packets, n_big, n, seen) and all_marked(seen, n):
             return 0
     if not identity:
         memset(seen, 0, n + 1)      # (runs_bad may have marked rays)
