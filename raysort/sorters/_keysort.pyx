@@ -1226,6 +1226,11 @@ cdef int compact_plan(uint64_t vary, int index_bits, int split_bits, int *top,
     leaves the keys of a bounce's 1024-ray packet one to three runs."""
     cdef int nrun = 0, j, r, gap, width, lowest, p
     cdef uint64_t v = vary, run, splits
+    if vary and 64 - clz64(vary) - ctz64(vary) + index_bits <= 32:
+        # every gap fits: the joins below would end in this one run
+        top[0], bottom[0] = 63 - clz64(vary), ctz64(vary)
+        nrun = 1
+        v = 0
     # the runs of set bits of vary, highest first
     while v:
         top[nrun] = 63 - clz64(v)
