@@ -1267,12 +1267,17 @@ cdef int compact_plan(uint64_t vary, int index_bits, int split_bits, int *top,
 
 
 cdef void compact_keys(const uint64_t *keys, int n, int nrun, const int *top,
-                       const int *bottom, uint32_t *k32) noexcept nogil:
-    """k32[i] |= the runs of bits of keys[i] that :func:`compact_plan` chose, from the top."""
-    cdef int r, p = 32
+                       const int *bottom, bint with_index, uint32_t *k32) noexcept nogil:
+    """k32[i] = the runs of bits of keys[i] that :func:`compact_plan` chose, from the top,
+    and (``with_index``) i below them: the first run's pass writes k32, the others OR
+    into it."""
+    cdef int r, i, p = 32
+    if nrun == 0:
+        for i in range(n):
+            k32[i] = <uint32_t> i if with_index else 0
     for r in range(nrun):
         p -= top[r] - bottom[r] + 1
-        gather_run(keys, n, bottom[r], top[r] - bottom[r] + 1, p, k32)
+        gather_run(keys, n, bottom[r], top[r] - bottom[r] + 1, p, r == 0, with_index, k32)
 
 
 cdef int bits_for(int n) noexcept nogil:
@@ -1292,13 +1297,11 @@ cdef int sort_compact(const uint64_t *keys, int n, int start, uint64_t vary, int
     32-bit keys in half the time of 64-bit ones."""
     cdef int top[64]
     cdef int bottom[64]
-    cdef int i, q, index_bits = bits_for(n)
+    cdef int q, index_bits = bits_for(n)
     cdef int nrun = compact_plan(vary, index_bits, split_bits, top, bottom, &q)
     if nrun < 0:
         return -1
-    for i in range(n):
-        k32[i] = <uint32_t> i
-    compact_keys(keys, n, nrun, top, bottom, k32)
+    compact_keys(keys, n, nrun, top, bottom, True, k32)
     sort_u32(k32, n, NULL)
     ray_order(k32, n, (<uint32_t> 1 << index_bits) - 1, start, order + start)
     return cut_packets(k32, n, start, packet_size, q, True, offsets)
@@ -1322,8 +1325,7 @@ cdef int sort_runs(const uint64_t *keys, int n, int start, uint64_t vary, int ru
     cdef uint32_t split = 0 if q == 0 else ~(<uint32_t> 0) << (32 - q)
     if nrun < 0:
         return -1
-    memset(k32, 0, n * sizeof(uint32_t))
-    compact_keys(keys, n, nrun, top, bottom, k32)
+    compact_keys(keys, n, nrun, top, bottom, False, k32)
     runs = run_heads(k32, n, pos, head)
     sort_u32(head, runs, NULL)
     # each run's rays at its place; a sub-packet where the top q bits change (the
@@ -1340,12 +1342,20 @@ cdef int sort_runs(const uint64_t *keys, int n, int start, uint64_t vary, int ru
 
 
 cdef inline void gather_run(const uint64_t *keys, int n, int bottom, int length, int at,
-                            uint32_t *k32) noexcept nogil:
-    """k32[i] |= bits [bottom, bottom + length) of keys[i], placed at bit ``at``."""
+                            bint first, bint with_index, uint32_t *k32) noexcept nogil:
+    """k32[i] |= bits [bottom, bottom + length) of keys[i], placed at bit ``at`` (``first``:
+    k32[i] =, with i itself below them where ``with_index``)."""
     cdef uint64_t m = (<uint64_t> 1 << length) - 1
     cdef int i
-    for i in range(n):
-        k32[i] |= <uint32_t> ((keys[i] >> bottom) & m) << at
+    if first and with_index:
+        for i in range(n):
+            k32[i] = <uint32_t> ((keys[i] >> bottom) & m) << at | <uint32_t> i
+    elif first:
+        for i in range(n):
+            k32[i] = <uint32_t> ((keys[i] >> bottom) & m) << at
+    else:
+        for i in range(n):
+            k32[i] |= <uint32_t> ((keys[i] >> bottom) & m) << at
 
 
 cdef inline void put_chunk(int nc, uint64_t key, int32_t first, bint packed, uint64_t mask,
