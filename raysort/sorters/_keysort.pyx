@@ -22,8 +22,8 @@ looked up two coordinates at a time (:func:`plan_lookups`): three loads per ray.
 The avx512 build assembles it in vector registers instead where its bits fit the
 key's top 32 (:func:`plan_windows`, ``rs_keysort_window_keys``): sixteen rays at
 a time, one VPERMT2D lookup in a 32-entry table per coordinate (two for one whose
-whole byte counts).  A sorter's next call with the same table reuses the plan
-(``last_plan``).
+whole byte counts), and the sort reads their high halves (32-bit keys) as they are.
+A sorter's next call with the same table reuses the plan (``last_plan``).
 
 Keys are left aligned in a uint64: the sort looks at the top ``8 * digits``
 bits.  Within every large packet, ``(key, ray)`` pairs are sorted stably,
@@ -380,24 +380,21 @@ cdef extern from *:
      * (as rs_keysort_quantise does), >> shift[t] (11 or 8: VPERMT2D reads the low five
      * bits); n_tables is 6 or 12 (unused tables are zero), so that the loop over them
      * unrolls with every table in registers.  With octant, bits 31, 30, 29 are the
-     * signs of dx, dy, dz.  The keys are the scalar path's, bit for bit (plan_windows
-     * checks the rows). */
+     * signs of dx, dy, dz.  Writes each key's high half (its low half is zero), which
+     * the sort reads as it is (sort_packet of 32-bit keys: half the bytes of 64-bit
+     * keys to write and read, 0.89-0.98x the sort's time after a trace); the keys are
+     * the scalar path's, bit for bit (plan_windows checks the rows). */
     #define RS_KEYSORT_WINDOWS RS_ISA_AVX512
     #define RS_KEYSORT_TABLE_SLOTS 6
     #if RS_ISA_AVX512
-    static const int32_t rs_keysort_widen[2][16] = {
-        {0, 16, 0, 17, 0, 18, 0, 19, 0, 20, 0, 21, 0, 22, 0, 23},
-        {0, 24, 0, 25, 0, 26, 0, 27, 0, 28, 0, 29, 0, 30, 0, 31}};
     RS_INLINE void rs_keysort_window_keys_n(const int n_tables, const float *c, int stride,
                                             int m, const int *coord, const int *shift,
                                             const uint32_t *tables, const float *dx,
                                             const float *dy, const float *dz, int octant,
-                                            uint64_t *keys)
+                                            uint32_t *high_halves)
     {
         const __m512 zero = _mm512_set1_ps(0.0f);
-        const __m512i none = _mm512_set1_epi32(0),
-                      lo = _mm512_loadu_si512(rs_keysort_widen[0]),
-                      hi = _mm512_loadu_si512(rs_keysort_widen[1]);
+        const __m512i none = _mm512_set1_epi32(0);
         __m512i low[2 * RS_KEYSORT_TABLE_SLOTS], high[2 * RS_KEYSORT_TABLE_SLOTS],
                 count[2 * RS_KEYSORT_TABLE_SLOTS];
         const float *row[2 * RS_KEYSORT_TABLE_SLOTS];
@@ -428,44 +425,32 @@ cdef extern from *:
                 h = _mm512_mask_blend_epi32(sy, h, _mm512_or_si512(h, _mm512_set1_epi32(1 << 30)));
                 h = _mm512_mask_blend_epi32(sz, h, _mm512_or_si512(h, _mm512_set1_epi32(1 << 29)));
             }
-            /* key = h << 32: the low halves zero, the high ones h, eight keys a vector */
-            __m512i first = _mm512_permutex2var_epi32(none, lo, h),
-                    second = _mm512_permutex2var_epi32(none, hi, h);
-            if (k == 0xFFFF) {
-                _mm512_storeu_si512(keys + j, first);
-                _mm512_storeu_si512(keys + j + 8, second);
-            } else {
-                /* two 32-bit lanes a key */
-                int n = m - j;
-                __mmask16 k_lo = (__mmask16)(n >= 8 ? 0xFFFF : (1u << (2 * n)) - 1),
-                          k_hi = (__mmask16)(n > 8 ? (1u << (2 * (n - 8))) - 1 : 0);
-                _mm512_mask_storeu_epi32(keys + j, k_lo, first);
-                _mm512_mask_storeu_epi32(keys + j + 8, k_hi, second);
-            }
+            /* the key's high half (its low half is zero) */
+            _mm512_mask_storeu_epi32(high_halves + j, k, h);
         }
     }
     static void rs_keysort_window_keys(const float *c, int stride, int m, int n_tables,
                                        const int *coord, const int *shift,
                                        const uint32_t *tables, const float *dx,
                                        const float *dy, const float *dz, int octant,
-                                       uint64_t *keys)
+                                       uint32_t *high_halves)
     {
         if (n_tables == RS_KEYSORT_TABLE_SLOTS)
             rs_keysort_window_keys_n(RS_KEYSORT_TABLE_SLOTS, c, stride, m, coord, shift,
-                                     tables, dx, dy, dz, octant, keys);
+                                     tables, dx, dy, dz, octant, high_halves);
         else
             rs_keysort_window_keys_n(2 * RS_KEYSORT_TABLE_SLOTS, c, stride, m, coord, shift,
-                                     tables, dx, dy, dz, octant, keys);
+                                     tables, dx, dy, dz, octant, high_halves);
     }
     #else
     static void rs_keysort_window_keys(const float *c, int stride, int m, int n_tables,
                                        const int *coord, const int *shift,
                                        const uint32_t *tables, const float *dx,
                                        const float *dy, const float *dz, int octant,
-                                       uint64_t *keys)
+                                       uint32_t *high_halves)
     {
         (void)c; (void)stride; (void)m; (void)n_tables; (void)coord; (void)shift;
-        (void)tables; (void)dx; (void)dy; (void)dz; (void)octant; (void)keys;
+        (void)tables; (void)dx; (void)dy; (void)dz; (void)octant; (void)high_halves;
     }
     #endif
     static inline int rs_keysort_popcount64(uint64_t x)
@@ -581,7 +566,7 @@ cdef extern from *:
                                               const int *coord, const int *shift,
                                               const uint32_t *tables, const float *dx,
                                               const float *dy, const float *dz, bint octant,
-                                              uint64_t *keys) noexcept nogil
+                                              uint32_t *high_halves) noexcept nogil
     void directions "rs_keysort_directions"(const float *const *o, const float *const *d,
                                             bint octahedral, int m, float *c, int stride,
                                             const float *lo, const float *scale) noexcept nogil
@@ -784,6 +769,20 @@ cdef void plan_windows(KeyInputs *a, int n_coords) noexcept nogil:
     a.windows = True
 
 
+cdef void window_high_halves(const KeyInputs *a, int start, int n,
+                             uint32_t *high_halves) noexcept nogil:
+    """The high halves of the keys of rays [start, start + n) into high_halves[0, n)
+    where ``a.windows`` (their low halves are zero), BLOCK rays at a time."""
+    cdef float c[KEY_COORDS * BLOCK]
+    cdef int b = start, m
+    while b < start + n:
+        m = min(<int> BLOCK, start + n - b)
+        block_coordinates(a, b, m, c)
+        window_keys(c, BLOCK, m, a.n_windows, a.win_coord, a.win_shift, a.win_tables,
+                    a.d[0] + b, a.d[1] + b, a.d[2] + b, a.octant, high_halves + (b - start))
+        b += m
+
+
 cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcept nogil:
     """The keys of rays [start, start + n) into keys[0, n), BLOCK rays at a time."""
     cdef int b, j, k, m, n_coords = 5 if a.mode == DIR_OCTAHEDRAL else 6
@@ -807,15 +806,18 @@ cdef void ray_keys(const KeyInputs *a, int start, int n, uint64_t *keys) noexcep
     for k in range(KEY_COORDS):
         low[k] = a.table + (2 * k) * TABLE_ROW
         high[k] = a.table + (2 * k + 1) * TABLE_ROW
+    cdef uint32_t *high_halves = <uint32_t *> keys
+    if a.windows:
+        # the high halves to the buffer's first half, then each widened in place, the
+        # last first (key j's bytes hold high halves 2j and 2j + 1, read already)
+        window_high_halves(a, start, n, high_halves)
+        for j in range(n - 1, -1, -1):
+            keys[j] = <uint64_t> high_halves[j] << 32
+        return
     b = start
     while b < start + n:
         m = min(<int> BLOCK, start + n - b)
         block_coordinates(a, b, m, c)
-        if a.windows:
-            window_keys(c, BLOCK, m, a.n_windows, a.win_coord, a.win_shift, a.win_tables,
-                        a.d[0] + b, a.d[1] + b, a.d[2] + b, a.octant, keys + (b - start))
-            b += m
-            continue
         for k in range(n_coords):
             quantise(&c[k * BLOCK], &q[k * BLOCK], m)
         # the key is the OR of one table entry per byte of each quantised coordinate
@@ -1028,6 +1030,14 @@ cdef void digit_plan(uint64_t vary, int n, int floor, int *low_bit, int *width,
     low_bit[0] = max(top + 1 - passes[0] * width[0], floor)
 
 
+def _windows(str coordinates, const uint64_t[:, :, ::1] table, bint octant):
+    """Whether this build makes the keys of ``table`` in vector registers (and sorts their
+    high halves): :func:`plan_windows` (for the tests)."""
+    cdef KeyInputs a
+    plan(&a, &table[0, 0, 0], COORDINATES[coordinates], octant)
+    return bool(a.windows)
+
+
 def _digit_plan(uint64_t vary, int n, int floor=0):
     """``(low_bit, width, passes)`` of :func:`digit_plan` (for the tests)."""
     cdef int low_bit, width, passes
@@ -1096,16 +1106,83 @@ cdef int radix_sort(uint64_t *key, int32_t *item, uint64_t *key_tmp, int32_t *it
     return flip
 
 
-cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint compress,
+ctypedef fused key_t:
+    uint32_t                # compact keys, and the avx512 build's window keys (high halves)
+    uint64_t
+
+
+cdef int sort_packet(const key_t *keys, int start, int end, int digits, bint compress,
                      int packet_size, int split_bits, int32_t *order, int32_t *offsets,
                      uint64_t *ckey, int32_t *citem, uint64_t *ckey_tmp, int32_t *citem_tmp,
                      int32_t *cstart, uint64_t *skey, int32_t *count) noexcept nogil:
     """Sort rays [start, end), whose keys are keys[0, end - start), into
     order[start:end]; write sub-packet starts to offsets and return their number.
-    Work buffers hold end - start (+1) items, ``count`` :data:`COUNT_SIZE` ints."""
-    cdef int i, j, c, runs, nc = 0, flip, low_bit, width, passes, buckets, shift1, shift2
+    Work buffers hold end - start (+1) items, ``count`` :data:`COUNT_SIZE` ints.
+    32-bit keys are the high halves of 64-bit keys whose low halves are zero (the
+    avx512 build's window keys: half the bytes to write and read); where neither the
+    packet's order nor a 32-bit compact sort serves, they are widened and
+    :func:`sort_wide` sorts them."""
+    cdef int i, c, runs
     cdef int descents
-    cdef uint64_t mask, low, key, all_and, all_or, dmask
+    cdef key_t all_and, all_or, kmask
+    cdef uint64_t mask, vary
+    cdef int n = end - start, bits = 8 * digits
+    # (sort_wide's rule: the chunk's index fits below the key)
+    cdef bint packed = bits <= 48 and split_bits <= bits and n <= (<int64_t> 1) << (64 - bits)
+    mask = (~(<uint64_t> 0) << (64 - bits)) if bits < 64 else ~(<uint64_t> 0)
+    kmask = <key_t> (mask >> (64 - 8 * sizeof(key_t)))
+    # the bits that differ between keys: only those are sorted on; the runs of equal
+    # keys: compression pays only when they are long (the order is the same); and
+    # whether the sorted bits ever descend (one loop the compiler vectorises)
+    all_and, all_or = keys[0], keys[0]
+    runs = 1
+    descents = 0
+    for i in range(1, n):
+        all_and &= keys[i]
+        all_or |= keys[i]
+        runs += keys[i] != keys[i - 1]
+        descents |= (keys[i] & kmask) < (keys[i - 1] & kmask)
+    vary = (<uint64_t> (all_and ^ all_or) << (64 - 8 * sizeof(key_t))) & mask
+    compress = compress and 2 * runs <= n
+    if not compress and not descents:
+        # already in order (coherent rays often are: camera rays in their tile's Morton
+        # order): the stable sort leaves every ray where it is.  (Not where long runs of
+        # equal keys make the compressed sort cheap anyway.)
+        iota(order + start, start, n)
+        return cut_packets(keys, n, start, packet_size, split_bits, split_bits <= bits,
+                           offsets)
+    if RUN_HEADS and COMPACT_SORT and packed and RUNS_PER_RAY * runs <= n:
+        c = sort_runs(keys, n, start, vary, runs, split_bits, packet_size, order, offsets,
+                      <uint32_t *> citem, <uint32_t *> citem_tmp, cstart)
+        if c >= 0:
+            return c
+    if packed and not compress and COMPACT_SORT:
+        c = sort_compact(keys, n, start, vary, split_bits, packet_size, order, offsets,
+                         <uint32_t *> citem)
+        if c >= 0:
+            return c
+    if key_t is uint64_t:
+        return sort_wide(keys, start, end, digits, compress, runs, vary, packet_size,
+                         split_bits, order, offsets, ckey, citem, ckey_tmp, citem_tmp, cstart,
+                         skey, count)
+    else:
+        for i in range(n):
+            ckey[i] = <uint64_t> keys[i] << 32
+        return sort_wide(ckey, start, end, digits, compress, runs, vary, packet_size,
+                         split_bits, order, offsets, ckey, citem, ckey_tmp, citem_tmp, cstart,
+                         skey, count)
+
+
+cdef int sort_wide(const uint64_t *keys, int start, int end, int digits, bint compress,
+                   int runs, uint64_t vary, int packet_size, int split_bits, int32_t *order,
+                   int32_t *offsets, uint64_t *ckey, int32_t *citem, uint64_t *ckey_tmp,
+                   int32_t *citem_tmp, int32_t *cstart, uint64_t *skey,
+                   int32_t *count) noexcept nogil:
+    """:func:`sort_packet` of 64-bit keys by NumPy's sort of 64-bit keys (avx512 builds)
+    or the radix sort, ``runs``, ``vary`` (the sorted bits that differ between keys) and
+    ``compress`` (whether to sort runs as chunks) as sort_packet found them."""
+    cdef int i, j, nc = 0, flip, low_bit, width, passes, buckets, shift1, shift2
+    cdef uint64_t mask, low, key, dmask
     cdef int32_t *h1
     cdef int32_t *h2
     # a chunk is every ray, or (compress) every run of equal keys in input order
@@ -1117,38 +1194,7 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
     cdef int32_t *items = NULL if packed else citem
     mask = (~(<uint64_t> 0) << (64 - bits)) if bits < 64 else ~(<uint64_t> 0)
     low = ~mask
-    cdef bint simple, library = LIBRARY_SORT and packed
-    # the bits that differ between keys: only those are sorted on; the runs of equal
-    # keys: compression pays only when they are long (the order is the same); and
-    # whether the sorted bits ever descend (one loop the compiler vectorises)
-    all_and, all_or = keys[0], keys[0]
-    runs = 1
-    descents = 0
-    for i in range(1, n):
-        all_and &= keys[i]
-        all_or |= keys[i]
-        runs += keys[i] != keys[i - 1]
-        descents |= (keys[i] & mask) < (keys[i - 1] & mask)
-    compress = compress and 2 * runs <= n
-    if not compress and not descents:
-        # already in order (coherent rays often are: camera rays in their tile's Morton
-        # order): the stable sort leaves every ray where it is.  (Not where long runs of
-        # equal keys make the compressed sort cheap anyway.)
-        iota(order + start, start, n)
-        return cut_packets(keys, n, start, packet_size, split_bits, split_bits <= bits,
-                           offsets)
-    simple = packed and not compress
-    if RUN_HEADS and COMPACT_SORT and packed and RUNS_PER_RAY * runs <= n:
-        c = sort_runs(keys, n, start, (all_and ^ all_or) & mask, runs, split_bits,
-                      packet_size, order, offsets, <uint32_t *> citem,
-                      <uint32_t *> citem_tmp, cstart)
-        if c >= 0:
-            return c
-    if simple and COMPACT_SORT:
-        c = sort_compact(keys, n, start, (all_and ^ all_or) & mask, split_bits,
-                         packet_size, order, offsets, <uint32_t *> citem)
-        if c >= 0:
-            return c
+    cdef bint simple = packed and not compress, library = LIBRARY_SORT and packed
     if library:
         # the packed keys are all different: NumPy's sort of them is the stable sort
         if simple:
@@ -1165,8 +1211,7 @@ cdef int sort_packet(const uint64_t *keys, int start, int end, int digits, bint 
                                offsets)
         return finish_packet(ckey, citem, nc, n, start, compress, packed, low, cstart,
                              packet_size, split_bits, split_bits <= bits, order, offsets, skey)
-    digit_plan((all_and ^ all_or) & mask, n, 0 if packed else 64 - bits, &low_bit, &width,
-               &passes)
+    digit_plan(vary, n, 0 if packed else 64 - bits, &low_bit, &width, &passes)
     buckets = 1 << width
     dmask = <uint64_t> buckets - 1
     # up to three digits are counted in one loop without tests (the histograms of
@@ -1266,7 +1311,7 @@ cdef int compact_plan(uint64_t vary, int index_bits, int split_bits, int *top,
     return nrun
 
 
-cdef void compact_keys(const uint64_t *keys, int n, int nrun, const int *top,
+cdef void compact_keys(const key_t *keys, int n, int nrun, const int *top,
                        const int *bottom, bint with_index, uint32_t *k32) noexcept nogil:
     """k32[i] = the runs of bits of keys[i] that :func:`compact_plan` chose, from the top,
     and (``with_index``) i below them: the first run's pass writes k32, the others OR
@@ -1288,7 +1333,7 @@ cdef int bits_for(int n) noexcept nogil:
     return b
 
 
-cdef int sort_compact(const uint64_t *keys, int n, int start, uint64_t vary, int split_bits,
+cdef int sort_compact(const key_t *keys, int n, int start, uint64_t vary, int split_bits,
                       int packet_size, int32_t *order, int32_t *offsets,
                       uint32_t *k32) noexcept nogil:
     """:func:`sort_packet` of rays [start, start + n) with 32-bit compact keys
@@ -1307,7 +1352,7 @@ cdef int sort_compact(const uint64_t *keys, int n, int start, uint64_t vary, int
     return cut_packets(k32, n, start, packet_size, q, True, offsets)
 
 
-cdef int sort_runs(const uint64_t *keys, int n, int start, uint64_t vary, int runs,
+cdef int sort_runs(const key_t *keys, int n, int start, uint64_t vary, int runs,
                    int split_bits, int packet_size, int32_t *order, int32_t *offsets,
                    uint32_t *k32, uint32_t *head, int32_t *pos) noexcept nogil:
     """:func:`sort_compact` by runs of equal keys (avx512 builds: RUN_HEADS), for
@@ -1341,12 +1386,14 @@ cdef int sort_runs(const uint64_t *keys, int n, int start, uint64_t vary, int ru
     return n_sub
 
 
-cdef inline void gather_run(const uint64_t *keys, int n, int bottom, int length, int at,
+cdef inline void gather_run(const key_t *keys, int n, int bottom, int length, int at,
                             bint first, bint with_index, uint32_t *k32) noexcept nogil:
     """k32[i] |= bits [bottom, bottom + length) of keys[i], placed at bit ``at`` (``first``:
-    k32[i] =, with i itself below them where ``with_index``)."""
+    k32[i] =, with i itself below them where ``with_index``); 32-bit keys are the high
+    halves of 64-bit keys (bottom >= 32)."""
     cdef uint64_t m = (<uint64_t> 1 << length) - 1
     cdef int i
+    bottom -= 64 - 8 * sizeof(key_t)
     if first and with_index:
         for i in range(n):
             k32[i] = <uint32_t> ((keys[i] >> bottom) & m) << at | <uint32_t> i
@@ -1433,11 +1480,6 @@ cdef int finish_packet(const uint64_t *sk, const int32_t *si, int nc, int n, int
     return cut_packets(sk, n, start, packet_size, split_bits, grouped, offsets)
 
 
-ctypedef fused key_t:
-    uint32_t                # sort_compact's keys
-    uint64_t
-
-
 cdef int cut_packets(const key_t *sk, int n, int start, int packet_size, int split_bits,
                      bint grouped, int32_t *offsets) noexcept nogil:
     """Cut keys ``sk[0, n)`` of rays [start, start + n) into sub-packets: a new one
@@ -1514,6 +1556,14 @@ cdef object sort_packets(const KeyInputs *a, const uint64_t *keys, const int32_t
         for p in range(n_packets):
             if packets[p + 1] > packets[p]:
                 prefetch_out(&order_mv[packets[p]], packets[p + 1] - packets[p])
+                if a != NULL and a.windows:     # the keys' high halves, to skey
+                    window_high_halves(a, packets[p], packets[p + 1] - packets[p],
+                                       <uint32_t *> skey)
+                    n_sub += sort_packet(<const uint32_t *> skey, packets[p], packets[p + 1],
+                                         digits, compress, packet_size, split_bits,
+                                         &order_mv[0], &offsets_mv[n_sub], ckey, citem,
+                                         ckey_tmp, citem_tmp, cstart, skey, count)
+                    continue
                 if a != NULL:       # sort_packet reads the keys from its own work buffer
                     ray_keys(a, packets[p], packets[p + 1] - packets[p], ckey)
                     kp = ckey

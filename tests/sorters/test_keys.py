@@ -403,6 +403,45 @@ def test_sort_keys_in_runs(rng, each_isa, compress, packet_size, split_bits):
                                                      split_bits))
 
 
+@pytest.mark.parametrize("spec", ["two_point", "termination", "origin_direction", "garanzha",
+                                  "two_point:split_bits=10,packet_size=7",
+                                  "origin_direction:layout=octahedral",
+                                  "garanzha:split=true,packet_size=16"])
+def test_sorters_sort_rays_in_runs(spec, rng, each_isa):
+    """A sorter's order and cuts of rays whose keys come in runs (copies of a ray, as
+    shadow and camera rays nearly are), of a packet already in key order and of a
+    4,096-ray packet whose varying bits and index do not fit 32 bits, against the
+    stable sort of the keys it makes: on the avx512 builds the sort reads the keys'
+    high halves as made in vector registers (sort_packet of 32-bit keys: runs, compact
+    keys, the packet's own order, and widened to 64 bits for the rest)."""
+    sorter = raysort.create("sorters", spec)
+    base = inside_rays(rng, 600)
+    sizes = [1, 3, 500, 1024, 0, 900, 48, 4096, 700]
+    pick = []
+    for p, size in enumerate(sizes):
+        if p == 7:              # every ray its own
+            pick.append(rng.integers(0, len(base), size=size))
+            continue
+        lengths = rng.choice([1, 2, 3, 7, 15, 16, 17, 40], size=size)
+        pick.append(np.repeat(rng.integers(0, 20 + 200 * (p % 2), size=size), lengths)[:size])
+    rays = base.take(np.concatenate(pick))
+    packets = np.cumsum([0, *sizes]).astype(np.int32)
+    last = slice(packets[-2], packets[-1])      # the last packet already in key order
+    keys = sorter.keys(rays, BOX)
+    index = np.arange(len(rays))
+    index[last] = packets[-2] + np.argsort(keys[last], kind="stable")
+    rays = rays.take(index)
+    keys = sorter.keys(rays, BOX)
+    assert np.all(np.diff(keys[last].astype(np.float64)) >= 0)
+    if each_isa in ("avx512", "avx512emu"):
+        assert isa.module("sorters._keysort")._windows(sorter.coordinates, sorter._table,
+                                                       sorter.octant)
+    order, offsets = sorter.sort(rays, packets, BOX)
+    assert np.array_equal(order, reference_order(keys, packets, sorter._digits))
+    assert np.array_equal(offsets, reference_offsets(keys[order], packets, sorter.packet_size,
+                                                     sorter._split))
+
+
 @pytest.mark.parametrize("n", [1, 5, 300, 1024, 4096])
 def test_digit_plan_covers_the_varying_bits(n, rng):
     """The radix digits span every bit from the highest to the lowest varying one, are
