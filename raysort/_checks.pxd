@@ -104,8 +104,8 @@ cdef inline int rays_bad(const int32_t *order, Py_ssize_t a, Py_ssize_t b, int32
     then a store per ray, rays known to be inside.  A ray seen twice is not tested
     here: n positions whose rays all lie in ``[0, n)`` hold each ray once exactly when
     every ray is marked (:func:`all_marked`).  The stores alone, without a load of the
-    byte each one writes, took 0.85-0.90x the whole check's time (shadow rays' orders
-    of ``two_point`` and ``nah``, AVX-512)."""
+    byte each one writes, took 0.84-0.92x the whole check's time (the orders ``nah``
+    and ``two_point`` give shadow and diffuse rays, AVX-512)."""
     cdef Py_ssize_t i
     if range_bad(order, a, b, lo, hi):
         return 1

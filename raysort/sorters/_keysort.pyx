@@ -382,7 +382,7 @@ cdef extern from *:
      * unrolls with every table in registers.  With octant, bits 31, 30, 29 are the
      * signs of dx, dy, dz.  Writes each key's high half (its low half is zero), which
      * the sort reads as it is (sort_packet of 32-bit keys: half the bytes of 64-bit
-     * keys to write and read, 0.89-0.98x the sort's time after a trace); the keys are
+     * keys to write and read, 0.87-0.97x the sort's time after a trace); the keys are
      * the scalar path's, bit for bit (plan_windows checks the rows). */
     #define RS_KEYSORT_WINDOWS RS_ISA_AVX512
     #define RS_KEYSORT_TABLE_SLOTS 6

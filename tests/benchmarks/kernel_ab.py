@@ -20,7 +20,8 @@ the ISA whose build was copied.
 With ``--rays camera`` (or ``diffuse``, or ``shadow``) it traces, instead of frames, the
 primary (or first-bounce diffuse, or the camera hits' any-hit shadow) rays of a ``--size``
 x ``--size`` image at 1 spp through
-``Pipeline.trace`` (sort, gather, traverse, scatter; plugin checks off): ``--calls`` calls
+``Pipeline.trace`` (sort, gather, traverse, scatter; plugin checks off unless ``--checks``,
+which a change to the contract checks, ``_contract``, needs): ``--calls`` calls
 per build and round, the round's median call, and prints each build's Mrays/s and the
 per-round speed-up of the new build (the old build's time over the new one's).  The hits
 must be bit-identical.
@@ -105,7 +106,7 @@ def trace_rounds(args, builds):
     else:
         kind = "shadow" if args.rays == "shadow" else "diffuse:depth=1"
         work = workload(scene, kind, width=args.size, height=args.size, spp=1, seed=1)
-    pipe = raysort.Pipeline(scene, threads=1, check_plugins=False, sorter=args.sorter,
+    pipe = raysort.Pipeline(scene, threads=1, check_plugins=args.checks, sorter=args.sorter,
                             traversal=args.traversal)
     args.spp = 1
     print_header(args, pipe)
@@ -156,6 +157,9 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=512, help="image edge in pixels (512)")
     parser.add_argument("--spp", type=int, default=16, help="samples per pixel (16)")
     parser.add_argument("--rounds", type=int, default=6, help="frames per build (6)")
+    parser.add_argument("--checks", action="store_true",
+                        help="with --rays: check every plugin's results, as the default "
+                             "pipeline does (time _contract's sort_result with --function)")
     parser.add_argument("--function", default="",
                         help="also time this function of the module (e.g. _shade)")
     parser.add_argument("--threads", type=int, default=1, help="render threads (1)")
