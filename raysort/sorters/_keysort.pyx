@@ -213,8 +213,8 @@ cdef extern from *:
      * The end point is o + s d with s = min(L / |d|, exit * shrink), the exit in units
      * of d (a slab test on d itself, which needs no |d|): the same point as o + L' d/|d|
      * with L' clamped in world units, but two operations shorter a ray, and the slab
-     * test no longer waits for the square root (0.90-0.93x the sort's time on shadow
-     * rays, AVX-512).  A zero or non-finite direction gives inf or NaN: its key is then
+     * test no longer waits for the square root (0.93x the sort's time on shadow rays,
+     * AVX-512).  A zero or non-finite direction gives inf or NaN: its key is then
      * arbitrary.  One loop, its temporaries in registers (one loop per step kept them
      * in memory), with the same IEEE operations per ray as a scalar build. */
     static inline void rs_keysort_end_points_loop(
@@ -1556,7 +1556,7 @@ cdef object sort_packets(const KeyInputs *a, const uint64_t *keys, const int32_t
         for p in range(n_packets):
             if packets[p + 1] > packets[p]:
                 prefetch_out(&order_mv[packets[p]], packets[p + 1] - packets[p])
-                if a != NULL and a.windows:     # the keys' high halves, to skey
+                if a != NULL and a.windows and split_bits <= 32:   # the keys' high halves
                     window_high_halves(a, packets[p], packets[p + 1] - packets[p],
                                        <uint32_t *> skey)
                     n_sub += sort_packet(<const uint32_t *> skey, packets[p], packets[p + 1],

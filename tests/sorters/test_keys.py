@@ -442,6 +442,25 @@ def test_sorters_sort_rays_in_runs(spec, rng, each_isa):
                                                      sorter._split))
 
 
+@pytest.mark.parametrize("digits,split_bits", [(3, 0), (4, 12), (8, 40)])
+def test_sort_rays_is_sort_keys_of_make_keys(digits, split_bits, rng, each_isa):
+    """sort_rays (keys made packet by packet; on the avx512 builds their high halves
+    sorted as 32-bit keys where the split is within them) gives sort_keys' order and
+    cuts of make_keys' keys, for any digits and split."""
+    module = isa.module("sorters._keysort")
+    sorter = raysort.create("sorters", "two_point")
+    base = inside_rays(rng, 300)
+    rays = base.take(np.repeat(rng.integers(0, 300, size=900), 3)[:2500])
+    packets = np.array([0, 1, 700, 1724, 2500], np.int32)
+    table = sorter._table
+    keys = module.make_keys(rays, "end_point", BOX, table, length=2.5, octant=True)
+    want = module.sort_keys(keys, packets, digits, packet_size=64, split_bits=split_bits)
+    got = module.sort_rays(rays, "end_point", BOX, table, packets, digits, length=2.5,
+                           octant=True, packet_size=64, split_bits=split_bits)
+    assert np.array_equal(got[0], want[0])
+    assert np.array_equal(got[1], want[1])
+
+
 @pytest.mark.parametrize("n", [1, 5, 300, 1024, 4096])
 def test_digit_plan_covers_the_varying_bits(n, rng):
     """The radix digits span every bit from the highest to the lowest varying one, are
