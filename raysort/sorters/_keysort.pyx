@@ -376,9 +376,8 @@ cdef extern from *:
      * key is the OR over those windows of a 32-entry table indexed by the window's
      * bits, which VPERMT2D looks up for sixteen rays at once (the scalar path reads
      * three 256-entry pair tables per ray).  Table t, its entries at tables[32 * t],
-     * serves coordinate c[coord[t] * stride + j], quantised by rs_keysort_quantise16
-     * (as rs_keysort_quantise does), >> shift[t] (11 or 8: VPERMT2D reads the low five
-     * bits); n_tables is 6 or 12 (unused tables are zero), so that the loop over them
+     * serves coordinate c[coord[t] * stride + j], quantised as rs_keysort_quantise does,
+     * >> shift[t] (11 or 8: VPERMT2D reads the low five bits); n_tables is 6 or 12 (unused tables are zero), so that the loop over them
      * unrolls with every table in registers.  With octant, bits 31, 30, 29 are the
      * signs of dx, dy, dz.  Writes each key's high half (its low half is zero), which
      * the sort reads as it is (sort_packet of 32-bit keys: half the bytes of 64-bit
@@ -393,15 +392,19 @@ cdef extern from *:
                                             const float *dy, const float *dz, int octant,
                                             uint32_t *high_halves)
     {
-        const __m512 zero = _mm512_set1_ps(0.0f);
+        const __m512 zero = _mm512_set1_ps(0.0f), one = _mm512_set1_ps(1.0f);
         const __m512i none = _mm512_set1_epi32(0);
-        __m512i low[2 * RS_KEYSORT_TABLE_SLOTS], high[2 * RS_KEYSORT_TABLE_SLOTS],
-                count[2 * RS_KEYSORT_TABLE_SLOTS];
+        __m512i low[2 * RS_KEYSORT_TABLE_SLOTS], high[2 * RS_KEYSORT_TABLE_SLOTS];
+        __m512 scale[2 * RS_KEYSORT_TABLE_SLOTS];
         const float *row[2 * RS_KEYSORT_TABLE_SLOTS];
         for (int t = 0; t < n_tables; ++t) {
             low[t] = _mm512_loadu_si512(tables + 32 * t);
             high[t] = _mm512_loadu_si512(tables + 32 * t + 16);
-            count[t] = _mm512_set1_epi32(shift[t]);
+            /* (int)(x * 65535) >> shift is (int)(x * (65535 / 2^shift)) for x in [0, 1]:
+             * scaling by a power of two is exact, and truncation then shift is
+             * truncation of the quotient; one multiplication, no shift (the key sorts
+             * 0.96-0.99x on shadow and camera rays) */
+            scale[t] = _mm512_set1_ps(65535.0f / (float)(1 << shift[t]));
             row[t] = c + coord[t] * stride;
         }
         for (int j = 0; j < m; j += 16) {
@@ -409,9 +412,10 @@ cdef extern from *:
             __mmask16 k = (__mmask16)(m - j >= 16 ? 0xFFFF : (1u << (m - j)) - 1);
             __m512i h = none;
             for (int t = 0; t < n_tables; ++t) {
-                __m512i q = rs_keysort_quantise16(_mm512_maskz_loadu_ps(k, row[t] + j));
+                __m512 x = _mm512_min_ps(_mm512_max_ps(_mm512_maskz_loadu_ps(k, row[t] + j),
+                                                       zero), one);
                 h = _mm512_or_si512(h, _mm512_permutex2var_epi32(
-                    low[t], _mm512_srlv_epi32(q, count[t]), high[t]));
+                    low[t], _mm512_cvttps_epi32(_mm512_mul_ps(x, scale[t])), high[t]));
             }
             if (octant) {
                 __mmask16 sx = _mm512_cmp_ps_mask(_mm512_maskz_loadu_ps(k, dx + j), zero,
