@@ -376,9 +376,10 @@ cdef extern from *:
      * key is the OR over those windows of a 32-entry table indexed by the window's
      * bits, which VPERMT2D looks up for sixteen rays at once (the scalar path reads
      * three 256-entry pair tables per ray).  Table t, its entries at tables[32 * t],
-     * serves coordinate c[coord[t] * stride + j], quantised as rs_keysort_quantise does,
-     * >> shift[t] (11 or 8: VPERMT2D reads the low five bits); n_tables is 6 or 12 (unused tables are zero), so that the loop over them
-     * unrolls with every table in registers.  With octant, bits 31, 30, 29 are the
+     * serves coordinate c[coord[t] * stride + j], quantised as rs_keysort_quantise
+     * does, >> shift[t] (11 or 8: VPERMT2D reads the low five bits); n_tables is 6 or 12
+     * (unused tables are zero), so that the loop over them unrolls with every table in
+     * registers.  With octant, bits 31, 30, 29 are the
      * signs of dx, dy, dz.  Writes each key's high half (its low half is zero), which
      * the sort reads as it is (sort_packet of 32-bit keys: half the bytes of 64-bit
      * keys to write and read, 0.87-0.97x the sort's time after a trace); the keys are
