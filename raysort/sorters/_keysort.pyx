@@ -109,10 +109,12 @@ cdef extern from *:
      * same q (sixteen at a time with AVX-512, eight with AVX2, four with SSE); written
      * with intrinsics because the compiler leaves the branchy scalar form unvectorised. */
     #if RS_ISA_AVX512
-    static inline __m512i rs_keysort_quantise16(__m512 c)
+    /* (int)(min(max(c, 0), 1) * scale), sixteen lanes: scale 65535, or 65535 / 2^shift
+     * for the window keys' top bits */
+    static inline __m512i rs_keysort_quantise16(__m512 c, __m512 scale)
     {
         __m512 x = _mm512_min_ps(_mm512_max_ps(c, _mm512_set1_ps(0.0f)), _mm512_set1_ps(1.0f));
-        return _mm512_cvttps_epi32(_mm512_mul_ps(x, _mm512_set1_ps(65535.0f)));
+        return _mm512_cvttps_epi32(_mm512_mul_ps(x, scale));
     }
     #endif
     static inline void rs_keysort_quantise(const float *c, int32_t *q, int m)
@@ -120,7 +122,8 @@ cdef extern from *:
         int j = 0;
     #if RS_ISA_AVX512
         for (; j + 16 <= m; j += 16)
-            _mm512_storeu_si512((void *)(q + j), rs_keysort_quantise16(_mm512_loadu_ps(c + j)));
+            _mm512_storeu_si512((void *)(q + j), rs_keysort_quantise16(_mm512_loadu_ps(c + j),
+                                                                        _mm512_set1_ps(65535.0f)));
     #endif
     #if RS_ISA_AVX2
         const __m256 zero8 = _mm256_setzero_ps(), one8 = _mm256_set1_ps(1.0f),
@@ -377,9 +380,9 @@ cdef extern from *:
      * bits, which VPERMT2D looks up for sixteen rays at once (the scalar path reads
      * three 256-entry pair tables per ray).  Table t, its entries at tables[32 * t],
      * serves coordinate c[coord[t] * stride + j], quantised as rs_keysort_quantise
-     * does, >> shift[t] (11 or 8: VPERMT2D reads the low five bits); n_tables is 6 or 12
-     * (unused tables are zero), so that the loop over them unrolls with every table in
-     * registers.  With octant, bits 31, 30, 29 are the
+     * does (rs_keysort_quantise16), >> shift[t] (11 or 8: VPERMT2D reads the low five
+     * bits); n_tables is 6 or 12 (unused tables are zero), so that the loop over them
+     * unrolls with every table in registers.  With octant, bits 31, 30, 29 are the
      * signs of dx, dy, dz.  Writes each key's high half (its low half is zero), which
      * the sort reads as it is (sort_packet of 32-bit keys: half the bytes of 64-bit
      * keys to write and read, 0.87-0.97x the sort's time after a trace); the keys are
@@ -393,7 +396,7 @@ cdef extern from *:
                                             const float *dy, const float *dz, int octant,
                                             uint32_t *high_halves)
     {
-        const __m512 zero = _mm512_set1_ps(0.0f), one = _mm512_set1_ps(1.0f);
+        const __m512 zero = _mm512_set1_ps(0.0f);
         const __m512i none = _mm512_set1_epi32(0);
         __m512i low[2 * RS_KEYSORT_TABLE_SLOTS], high[2 * RS_KEYSORT_TABLE_SLOTS];
         __m512 scale[2 * RS_KEYSORT_TABLE_SLOTS];
@@ -413,10 +416,9 @@ cdef extern from *:
             __mmask16 k = (__mmask16)(m - j >= 16 ? 0xFFFF : (1u << (m - j)) - 1);
             __m512i h = none;
             for (int t = 0; t < n_tables; ++t) {
-                __m512 x = _mm512_min_ps(_mm512_max_ps(_mm512_maskz_loadu_ps(k, row[t] + j),
-                                                       zero), one);
-                h = _mm512_or_si512(h, _mm512_permutex2var_epi32(
-                    low[t], _mm512_cvttps_epi32(_mm512_mul_ps(x, scale[t])), high[t]));
+                __m512i q = rs_keysort_quantise16(_mm512_maskz_loadu_ps(k, row[t] + j),
+                                                  scale[t]);
+                h = _mm512_or_si512(h, _mm512_permutex2var_epi32(low[t], q, high[t]));
             }
             if (octant) {
                 __mmask16 sx = _mm512_cmp_ps_mask(_mm512_maskz_loadu_ps(k, dx + j), zero,
