@@ -101,6 +101,7 @@ OCTANT_BITS = 3
 cdef extern from *:
     """
     #include "raysort/simd.h"
+    #include "raysort/lanes.h"
     /* c ? a : b, as a select the compiler vectorises (a Cython conditional is a branch) */
     static inline float rs_keysort_pick(int c, float a, float b) { return c ? a : b; }
     /* q[j] = (int)(min(max(c[j], 0), 1) * 65535): a coordinate clamped to [0, 1] (NaN
@@ -482,9 +483,10 @@ cdef extern from *:
     }
     /* The runs of equal values of k[0, n) (n >= 1): run c starts at pos[c] (and
      * pos[runs] = n), head[c] = its value | c; returns the number of runs.  Sixteen
-     * values at a time, each vector's run starts compressed to their place, with no
-     * branch on the values (AVX-512 only: RS_KEYSORT_RUN_HEADS). */
-    #define RS_KEYSORT_RUN_HEADS RS_ISA_AVX512
+     * values at a time (eight with AVX2), each vector's run starts compressed to their
+     * place, with no branch on the values (RS_KEYSORT_RUN_HEADS: the avx2 and avx512
+     * builds). */
+    #define RS_KEYSORT_RUN_HEADS RS_ISA_AVX2
     #if RS_ISA_AVX512
     static const int32_t rs_keysort_lane16[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12,
                                                   13, 14, 15};
@@ -532,6 +534,67 @@ cdef extern from *:
             for (int k = 16; k < len; k += 16)
                 _mm512_storeu_si512((void *)(out + at + k),
                                     _mm512_add_epi32(iota, _mm512_set1_epi32(start + first + k)));
+            group[ng] = at;             /* (overwritten unless a group starts here) */
+            ng += (j == 0) | ((key & split) != g);
+            g = key & split;
+            at += len;
+        }
+        group[ng] = at;
+        return ng;
+    }
+    #elif RS_ISA_AVX2
+    /* eight values at a time, the first alone (k[-1] is not read) and the last few
+     * (fewer than eight) one by one: a vector's stores, at r <= j, end within [0, n);
+     * the compress is a permutation looked up by the mask (lanes.h) */
+    static int rs_keysort_run_heads(const uint32_t *k, int n, int32_t *pos, uint32_t *head)
+    {
+        const __m256i iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        __m256i id = _mm256_add_epi32(iota, _mm256_set1_epi32(1));
+        int r = 1, j = 1;
+        pos[0] = 0;
+        head[0] = k[0];
+        for (; j + 8 <= n; j += 8) {
+            __m256i cur = _mm256_loadu_si256((const __m256i *)(k + j));
+            __m256i prev = _mm256_loadu_si256((const __m256i *)(k + j - 1));
+            int h = 0xFF & ~_mm256_movemask_ps(_mm256_castsi256_ps(
+                _mm256_cmpeq_epi32(cur, prev)));
+            __m256i lane = sw_compress_lanes(h);
+            _mm256_storeu_si256((__m256i *)(pos + r), _mm256_permutevar8x32_epi32(id, lane));
+            _mm256_storeu_si256((__m256i *)(head + r), _mm256_or_si256(
+                _mm256_permutevar8x32_epi32(cur, lane),
+                _mm256_add_epi32(iota, _mm256_set1_epi32(r))));
+            r += rs_popcount(h);
+            id = _mm256_add_epi32(id, _mm256_set1_epi32(8));
+        }
+        for (; j < n; ++j)
+            if (k[j] != k[j - 1]) {
+                pos[r] = j;
+                head[r] = k[j] | (uint32_t)r;
+                ++r;
+            }
+        pos[r] = n;
+        return r;
+    }
+    /* rs_keysort_place_runs with two eight-lane stores a run */
+    static int rs_keysort_place_runs(const uint32_t *head, int runs, const int32_t *pos,
+                                     uint32_t idx, uint32_t split, int32_t start,
+                                     int32_t *out, int32_t *group)
+    {
+        const __m256i iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+                      iota8 = _mm256_setr_epi32(8, 9, 10, 11, 12, 13, 14, 15);
+        int at = 0, ng = 0;
+        uint32_t g = 0;
+        for (int j = 0; j < runs; ++j) {
+            uint32_t key = head[j];
+            int c = (int)(key & idx), first = pos[c], len = pos[c + 1] - first;
+            __m256i base = _mm256_set1_epi32(start + first);
+            _mm256_storeu_si256((__m256i *)(out + at), _mm256_add_epi32(iota, base));
+            _mm256_storeu_si256((__m256i *)(out + at + 8), _mm256_add_epi32(iota8, base));
+            for (int k = 16; k < len; k += 16) {
+                base = _mm256_set1_epi32(start + first + k);
+                _mm256_storeu_si256((__m256i *)(out + at + k), _mm256_add_epi32(iota, base));
+                _mm256_storeu_si256((__m256i *)(out + at + k + 8), _mm256_add_epi32(iota8, base));
+            }
             group[ng] = at;             /* (overwritten unless a group starts here) */
             ng += (j == 0) | ((key & split) != g);
             g = key & split;
@@ -1362,7 +1425,7 @@ cdef int sort_compact(const key_t *keys, int n, int start, uint64_t vary, int sp
 cdef int sort_runs(const key_t *keys, int n, int start, uint64_t vary, int runs,
                    int split_bits, int packet_size, int32_t *order, int32_t *offsets,
                    uint32_t *k32, uint32_t *head, int32_t *pos) noexcept nogil:
-    """:func:`sort_compact` by runs of equal keys (avx512 builds: RUN_HEADS), for
+    """:func:`sort_compact` by runs of equal keys (avx2 and avx512 builds: RUN_HEADS), for
     packets whose keys come in runs (shadow rays: one run in 4 to 7 rays): each run's
     compact key, its run number below its bits, sorted (the run number keeps the sort
     stable), then each run's rays written in order at its place (IOTA_SPILL past).

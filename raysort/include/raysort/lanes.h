@@ -257,12 +257,18 @@ static const uint32_t rs_compress8[256] = {
  * slack): one lane permutation and one store, as AVX-512's compress.  The eight
  * scalar stores it replaces took 28 % of the stream filter's samples on Zen 3
  * (BENCHMARKS.md section 14). */
-RS_INLINE void sw_append(int32_t *out, int *n, rs_swi id, int bits)
+/* The permutation (for VPERMD) that moves the lanes set in `bits` to the bottom,
+ * lowest first: AVX-512's compress on eight lanes. */
+RS_INLINE __m256i sw_compress_lanes(int bits)
 {
     __m256i lane = _mm256_srlv_epi32(_mm256_set1_epi32((int)rs_compress8[bits]),
                                      _mm256_setr_epi32(0, 4, 8, 12, 16, 20, 24, 28));
-    lane = _mm256_and_si256(lane, _mm256_set1_epi32(7));
-    _mm256_storeu_si256((__m256i *)(out + *n), _mm256_permutevar8x32_epi32(id, lane));
+    return _mm256_and_si256(lane, _mm256_set1_epi32(7));
+}
+RS_INLINE void sw_append(int32_t *out, int *n, rs_swi id, int bits)
+{
+    _mm256_storeu_si256((__m256i *)(out + *n),
+                        _mm256_permutevar8x32_epi32(id, sw_compress_lanes(bits)));
     *n += rs_popcount(bits);
 }
 #else
