@@ -19,10 +19,12 @@ vectorises:
 
 A key that reads only the high byte of each coordinate (every default key) is
 looked up two coordinates at a time (:func:`plan_lookups`): three loads per ray.
-The avx512 build assembles it in vector registers instead where its bits fit the
-key's top 32 (:func:`plan_windows`, ``rs_keysort_window_keys``): sixteen rays at
-a time, one VPERMT2D lookup in a 32-entry table per coordinate (two for one whose
-whole byte counts), and the sort reads their high halves (32-bit keys) as they are.
+The avx2 and avx512 builds assemble it in vector registers instead where its bits
+fit the key's top 32 (:func:`plan_windows`, ``rs_keysort_window_keys``): sixteen
+rays at a time, one VPERMT2D lookup in a 32-entry table per coordinate (two for one
+whose whole byte counts), or eight rays at a time, one VPERMD lookup in an 8-entry
+table per three bits of a coordinate, and the sort reads their high halves (32-bit
+keys) as they are.
 A sorter's next call with the same table reuses the plan (``last_plan``).
 
 Keys are left aligned in a uint64: the sort looks at the top ``8 * digits``
@@ -89,6 +91,7 @@ cdef enum:
     COUNT_SIZE = 8 << MAX_DIGIT         # histogram ints: 64 bits take at most 8 digits
 cdef enum:
     BLOCK = 256             # rays whose coordinates are computed together, loop by loop
+    MAX_WINDOWS = 3 * KEY_COORDS    # window tables of a key: up to 3 per coordinate (AVX2)
     IOTA_SPILL = 15         # values iota (7) and place_runs (15) may write past their end
     RUNS_PER_RAY = 2        # sort_runs where a packet's keys come in runs of 2 rays or more
 #: widest and narrowest radix digit (bits)
@@ -373,23 +376,39 @@ cdef extern from *:
         for (int i = 0; i < n; ++i)
             out[i] = start + (int32_t)(k32[i] & idx);
     }
-    /* Keys of m rays assembled in vector registers (AVX-512 only; RS_KEYSORT_WINDOWS):
-     * for a short key whose table rows are each the OR of a lookup on the top five
-     * bits of the coordinate's high byte and one on its low three, and whose bits all
-     * lie in the key's high 32 bits (after the octant's shift), the high half of the
-     * key is the OR over those windows of a 32-entry table indexed by the window's
-     * bits, which VPERMT2D looks up for sixteen rays at once (the scalar path reads
-     * three 256-entry pair tables per ray).  Table t, its entries at tables[32 * t],
-     * serves coordinate c[coord[t] * stride + j], quantised as rs_keysort_quantise
-     * does (rs_keysort_quantise16), >> shift[t] (11 or 8: VPERMT2D reads the low five
-     * bits); n_tables is 6 or 12 (unused tables are zero), so that the loop over them
-     * unrolls with every table in registers.  With octant, bits 31, 30, 29 are the
-     * signs of dx, dy, dz.  Writes each key's high half (its low half is zero), which
-     * the sort reads as it is (sort_packet of 32-bit keys: half the bytes of 64-bit
-     * keys to write and read, 0.87-0.97x the sort's time after a trace); the keys are
-     * the scalar path's, bit for bit (plan_windows checks the rows). */
-    #define RS_KEYSORT_WINDOWS RS_ISA_AVX512
+    /* Keys of m rays assembled in vector registers (the avx2 and avx512 builds;
+     * RS_KEYSORT_WINDOWS): for a short key whose table rows are each the OR of their
+     * lookups on windows of the coordinate's high byte (RS_KEYSORT_WINDOW_BITS bits
+     * from its top down: 5 and 3 with AVX-512, 3, 3 and 2 with AVX2) and whose bits
+     * all lie in the key's high 32 bits (after the octant's shift), the high half of
+     * the key is the OR over those windows of a table indexed by the window's bits:
+     * 32 entries that VPERMT2D looks up for sixteen rays at once, or 8 that VPERMD
+     * looks up for eight (the scalar path reads three 256-entry pair tables per ray).
+     * Table t, its entries at tables[32 * t], serves coordinate c[coord[t] * stride +
+     * j], quantised as rs_keysort_quantise does, >> shift[t] (8 plus the window's
+     * lowest bit; the lookup reads the low five or three bits); n_tables is
+     * RS_KEYSORT_TABLE_SLOTS or twice that (unused tables are zero), so that the loop
+     * over them unrolls.  With octant, bits 31, 30, 29 are the signs of dx, dy, dz.
+     * Writes each key's high half (its low half is zero), which the sort reads as it
+     * is (sort_packet of 32-bit keys: half the bytes of 64-bit keys to write and read,
+     * 0.87-0.97x the sort's time after a trace, AVX-512); the keys are the scalar
+     * path's, bit for bit (plan_windows checks the rows). */
+    #define RS_KEYSORT_WINDOWS RS_ISA_AVX2
+    #if RS_ISA_AVX512
+    #define RS_KEYSORT_WINDOW_BITS 5
     #define RS_KEYSORT_TABLE_SLOTS 6
+    #else
+    #define RS_KEYSORT_WINDOW_BITS 3
+    #define RS_KEYSORT_TABLE_SLOTS 9
+    #endif
+    /* (int)(x * 65535) >> shift is (int)(x * (65535 / 2^shift)) for x in [0, 1]:
+     * scaling by a power of two is exact, and truncation then shift is truncation of
+     * the quotient; one multiplication, no shift (the key sorts 0.96-0.99x on shadow
+     * and camera rays, AVX-512) */
+    static inline float rs_keysort_window_scale(int shift)
+    {
+        return 65535.0f / (float)(1 << shift);
+    }
     #if RS_ISA_AVX512
     RS_INLINE void rs_keysort_window_keys_n(const int n_tables, const float *c, int stride,
                                             int m, const int *coord, const int *shift,
@@ -405,11 +424,7 @@ cdef extern from *:
         for (int t = 0; t < n_tables; ++t) {
             low[t] = _mm512_loadu_si512(tables + 32 * t);
             high[t] = _mm512_loadu_si512(tables + 32 * t + 16);
-            /* (int)(x * 65535) >> shift is (int)(x * (65535 / 2^shift)) for x in [0, 1]:
-             * scaling by a power of two is exact, and truncation then shift is
-             * truncation of the quotient; one multiplication, no shift (the key sorts
-             * 0.96-0.99x on shadow and camera rays) */
-            scale[t] = _mm512_set1_ps(65535.0f / (float)(1 << shift[t]));
+            scale[t] = _mm512_set1_ps(rs_keysort_window_scale(shift[t]));
             row[t] = c + coord[t] * stride;
         }
         for (int j = 0; j < m; j += 16) {
@@ -437,6 +452,61 @@ cdef extern from *:
             _mm512_mask_storeu_epi32(high_halves + j, k, h);
         }
     }
+    #elif RS_ISA_AVX2
+    /* eight rays' high halves from row[t] + j (masked: only the lanes of mask) */
+    RS_INLINE __m256i rs_keysort_window8(const int n_tables, const float *const *row,
+                                         const __m256 *scale, const __m256i *table,
+                                         const float *dx, const float *dy, const float *dz,
+                                         int octant, int j, int masked, __m256i mask)
+    {
+        const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.0f);
+        __m256i h = _mm256_setzero_si256();
+        for (int t = 0; t < n_tables; ++t) {
+            __m256 c = masked ? _mm256_maskload_ps(row[t] + j, mask)
+                              : _mm256_loadu_ps(row[t] + j);
+            __m256 x = _mm256_min_ps(_mm256_max_ps(c, zero), one);   /* as quantise */
+            h = _mm256_or_si256(h, _mm256_permutevar8x32_epi32(
+                table[t], _mm256_cvttps_epi32(_mm256_mul_ps(x, scale[t]))));
+        }
+        if (octant) {
+            const float *d[3] = {dx, dy, dz};
+            for (int a = 0; a < 3; ++a) {
+                __m256 v = masked ? _mm256_maskload_ps(d[a] + j, mask)
+                                  : _mm256_loadu_ps(d[a] + j);
+                h = _mm256_or_si256(h, _mm256_and_si256(
+                    _mm256_castps_si256(_mm256_cmp_ps(v, zero, _CMP_LT_OQ)),
+                    _mm256_set1_epi32((int32_t)(0x80000000u >> a))));
+            }
+        }
+        return h;
+    }
+    RS_INLINE void rs_keysort_window_keys_n(const int n_tables, const float *c, int stride,
+                                            int m, const int *coord, const int *shift,
+                                            const uint32_t *tables, const float *dx,
+                                            const float *dy, const float *dz, int octant,
+                                            uint32_t *high_halves)
+    {
+        __m256i table[2 * RS_KEYSORT_TABLE_SLOTS];
+        __m256 scale[2 * RS_KEYSORT_TABLE_SLOTS];
+        const float *row[2 * RS_KEYSORT_TABLE_SLOTS];
+        for (int t = 0; t < n_tables; ++t) {
+            table[t] = _mm256_loadu_si256((const __m256i *)(tables + 32 * t));
+            scale[t] = _mm256_set1_ps(rs_keysort_window_scale(shift[t]));
+            row[t] = c + coord[t] * stride;
+        }
+        int j = 0;
+        for (; j + 8 <= m; j += 8)
+            _mm256_storeu_si256((__m256i *)(high_halves + j), rs_keysort_window8(
+                n_tables, row, scale, table, dx, dy, dz, octant, j, 0, _mm256_setzero_si256()));
+        if (j < m) {                /* the last rays: not read past m, not written */
+            __m256i mask = _mm256_cmpgt_epi32(_mm256_set1_epi32(m - j),
+                                              _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+            _mm256_maskstore_epi32((int *)(high_halves + j), mask, rs_keysort_window8(
+                n_tables, row, scale, table, dx, dy, dz, octant, j, 1, mask));
+        }
+    }
+    #endif
+    #if RS_ISA_AVX2
     static void rs_keysort_window_keys(const float *c, int stride, int m, int n_tables,
                                        const int *coord, const int *shift,
                                        const uint32_t *tables, const float *dx,
@@ -632,6 +702,7 @@ cdef extern from *:
                                            uint32_t idx, uint32_t split, int32_t start,
                                            int32_t *out, int32_t *group) noexcept nogil
     int TABLE_SLOTS "RS_KEYSORT_TABLE_SLOTS"
+    int WINDOW_BITS "RS_KEYSORT_WINDOW_BITS"
     void window_keys "rs_keysort_window_keys"(const float *c, int stride, int m, int n_tables,
                                               const int *coord, const int *shift,
                                               const uint32_t *tables, const float *dx,
@@ -706,13 +777,14 @@ cdef struct KeyInputs:
     int width_second[KEY_COORDS]
     uint64_t pairs[KEY_COORDS][TABLE_ROW]
     # or, where the build and the table allow (see plan_windows), the high half of the
-    # key as the OR of n_windows 32-entry tables, table t indexed by a window of bits of
-    # coordinate win_coord[t]'s high byte (its quantised value >> win_shift[t])
+    # key as the OR of n_windows tables (32 entries each, of which AVX2 reads 8), table
+    # t indexed by a window of bits of coordinate win_coord[t]'s high byte (its
+    # quantised value >> win_shift[t])
     bint windows
     int n_windows
-    int win_coord[2 * KEY_COORDS]
-    int win_shift[2 * KEY_COORDS]
-    uint32_t win_tables[2 * KEY_COORDS * 32]
+    int win_coord[MAX_WINDOWS]
+    int win_shift[MAX_WINDOWS]
+    uint32_t win_tables[MAX_WINDOWS * 32]
 
 
 cdef void block_coordinates(const KeyInputs *a, int b, int m, float *c) noexcept nogil:
@@ -792,42 +864,54 @@ cdef void plan_lookups(KeyInputs *a, int n_coords) noexcept nogil:
                                                   | row_b[(ib << (8 - u[best])) & 0xFF])
 
 
-# the C kernel's table slots: a table per coordinate, or two
-assert TABLE_SLOTS == KEY_COORDS
+# the C kernel's table slots: TABLE_SLOTS or twice that, at most MAX_WINDOWS
+assert 2 * TABLE_SLOTS <= MAX_WINDOWS
 
 
 cdef void plan_windows(KeyInputs *a, int n_coords) noexcept nogil:
     """Set ``a.windows`` where the vectorised lookups give the keys of the scalar path
     (rs_keysort_window_keys): on a build that has them, for a short key whose table
-    rows are each the OR of their entries for the high byte's top five bits and its
-    low three (as every interleave is: each coordinate bit sets its own key bit) and
-    whose bits all lie in the key's high 32 bits after the octant's shift."""
-    cdef int k, x, i, n = 0, out_shift = 35 if a.octant else 32
+    rows are each the OR of their entries for the windows of the high byte (its top
+    ``WINDOW_BITS`` bits, the next ``WINDOW_BITS``, ...; as every interleave is: each
+    coordinate bit sets its own key bit) and whose bits all lie in the key's high 32
+    bits after the octant's shift.  A coordinate takes its top window, and each lower
+    one whose entries are not all its row's first."""
+    cdef int k, x, i, w, n = 0, out_shift = 35 if a.octant else 32
+    cdef int n_win = (8 + WINDOW_BITS - 1) // WINDOW_BITS     # windows of a byte
+    cdef int bottom[8]          # each window's lowest bit in the byte
+    cdef int mask[8]            # each window's bits
     cdef uint64_t low = (<uint64_t> 1 << out_shift) - 1
     cdef const uint64_t *row
-    cdef uint64_t every
-    cdef bint lower
+    cdef uint64_t every, joined
+    cdef bint varies[8]
     a.windows = False
     if not WINDOWS or a.low_bytes:
         return
+    for w in range(n_win):
+        bottom[w] = max(8 - WINDOW_BITS * (w + 1), 0)
+        mask[w] = ((1 << (8 - WINDOW_BITS * w)) - 1) & ~((1 << bottom[w]) - 1)
     for k in range(n_coords):
         row = a.table + (2 * k + 1) * TABLE_ROW
-        lower, every = False, 0
+        every = 0
+        for w in range(n_win):
+            varies[w] = False
         for x in range(TABLE_ROW):
-            if row[x] != (row[x & 0xF8] | row[x & 0x07]) or row[x] & low:
+            joined = 0
+            for w in range(n_win):
+                joined |= row[x & mask[w]]
+                varies[w] |= row[x & mask[w]] != row[0]
+            if row[x] != joined or row[x] & low:
                 return
-            lower |= row[x & 0x07] != row[0]
             every |= row[x]
         if every == 0:                  # the key draws nothing from this coordinate
             continue
-        for i in range(32):
-            a.win_tables[32 * n + i] = <uint32_t> (row[(i << 3) & 0xFF] >> out_shift)
-        a.win_coord[n], a.win_shift[n] = k, 11
-        n += 1
-        if lower:                       # the low three bits matter too
+        for w in range(n_win):
+            if w > 0 and not varies[w]:
+                continue
             for i in range(32):
-                a.win_tables[32 * n + i] = <uint32_t> (row[i & 0x07] >> out_shift)
-            a.win_coord[n], a.win_shift[n] = k, 8
+                a.win_tables[32 * n + i] = <uint32_t> (row[(i << bottom[w]) & mask[w]]
+                                                       >> out_shift)
+            a.win_coord[n], a.win_shift[n] = k, 8 + bottom[w]
             n += 1
     # unused tables (zero, of coordinate 0) up to TABLE_SLOTS or twice that: the loop over
     # them is unrolled
@@ -835,7 +919,7 @@ cdef void plan_windows(KeyInputs *a, int n_coords) noexcept nogil:
     for n in range(n, a.n_windows):
         for i in range(32):
             a.win_tables[32 * n + i] = 0
-        a.win_coord[n], a.win_shift[n] = 0, 11
+        a.win_coord[n], a.win_shift[n] = 0, 8
     a.windows = True
 
 
@@ -1177,7 +1261,7 @@ cdef int radix_sort(uint64_t *key, int32_t *item, uint64_t *key_tmp, int32_t *it
 
 
 ctypedef fused key_t:
-    uint32_t                # compact keys, and the avx512 build's window keys (high halves)
+    uint32_t                # compact keys, and the window keys (their high halves)
     uint64_t
 
 
@@ -1189,9 +1273,9 @@ cdef int sort_packet(const key_t *keys, int start, int end, int digits, bint com
     order[start:end]; write sub-packet starts to offsets and return their number.
     Work buffers hold end - start (+1) items, ``count`` :data:`COUNT_SIZE` ints.
     32-bit keys are the high halves of 64-bit keys whose low halves are zero (the
-    avx512 build's window keys: half the bytes to write and read); where neither the
-    packet's order nor a 32-bit compact sort serves, they are widened and
-    :func:`sort_wide` sorts them."""
+    window keys: half the bytes to write and read); where neither the packet's order
+    nor a 32-bit compact sort serves, they are widened and :func:`sort_wide` sorts
+    them."""
     cdef int i, c, runs
     cdef int descents
     cdef key_t all_and, all_or, kmask

@@ -31,6 +31,8 @@ from _helpers import random_rays
 
 BOX = np.array([[-3.0, -1.0, 2.0], [5.0, 4.0, 3.5]], dtype=np.float32)
 QMAX = 2 ** _keysort.COORD_BITS - 1
+#: the builds that assemble short keys in vector registers (plan_windows)
+VECTOR_KEYS = ("avx2", "avx512", "avx512emu")
 KEY_SORTERS = ["origin_direction", "two_point", "termination", "garanzha"]
 
 
@@ -191,8 +193,8 @@ def lookup_tables(rng):
 @pytest.mark.parametrize("mode", ["components", "octahedral", "end_point"])
 def test_keys_on_every_isa(mode, n, octant, rng, each_isa):
     """Every build's keys (on AVX-512 assembled sixteen at a time from 32-entry tables,
-    with a masked last vector) are the OR of the table's rows at the quantised
-    coordinates, with the octant's signs on top."""
+    on AVX2 eight at a time from 8-entry tables, with a masked last vector) are the OR
+    of the table's rows at the quantised coordinates, with the octant's signs on top."""
     rays = inside_rays(rng, n)
     n_coords = 5 if mode == "octahedral" else 6
     q = np.zeros((6, n), np.int64)
@@ -204,8 +206,10 @@ def test_keys_on_every_isa(mode, n, octant, rng, each_isa):
         want = apply_table(table, q)
         if octant:
             want = with_octant(want, rays)
-        got = isa.module("sorters._keysort").make_keys(rays, mode, BOX, table, length=2.5,
-                                                       octant=octant)
+        module = isa.module("sorters._keysort")
+        if name in ("eight-bits", "eight-lookups") and each_isa in VECTOR_KEYS:
+            assert module._windows(mode, table, octant), name
+        got = module.make_keys(rays, mode, BOX, table, length=2.5, octant=octant)
         assert np.array_equal(got, want), name
 
 
@@ -378,9 +382,9 @@ def test_sort_keys_with_runs_of_varying_bits(rng, each_isa, split_bits, sizes):
 @pytest.mark.parametrize("compress", [False, True])
 @pytest.mark.parametrize("packet_size,split_bits", [(64, 0), (7, 3), (64, 10), (16, 24)])
 def test_sort_keys_in_runs(rng, each_isa, compress, packet_size, split_bits):
-    """Keys in runs of equal keys, as shadow and camera rays' come (the avx512 builds
-    sort the runs, sort_runs, where a packet has a run in 3 rays or fewer): runs of 1 to
-    40 keys (around the 16 rays a run's first store writes), few or many distinct keys,
+    """Keys in runs of equal keys, as shadow and camera rays' come (the avx2 and avx512
+    builds sort the runs, sort_runs, where a packet's runs average 2 rays or more): runs of
+    1 to 40 keys (around the 16 rays a run's first stores write), few or many distinct keys,
     varying bits that fit a 32-bit key with the run number and bits that do not, runs
     at a packet's ends, packets of 1 to 1,024 rays; the stable sort and its cuts."""
     sizes = [1, 3, 4, 500, 1024, 0, 600, 900, 48]
@@ -411,9 +415,9 @@ def test_sorters_sort_rays_in_runs(spec, rng, each_isa):
     """A sorter's order and cuts of rays whose keys come in runs (copies of a ray, as
     shadow and camera rays nearly are), of a packet already in key order and of a
     4,096-ray packet whose varying bits and index do not fit 32 bits, against the
-    stable sort of the keys it makes: on the avx512 builds the sort reads the keys'
-    high halves as made in vector registers (sort_packet of 32-bit keys: runs, compact
-    keys, the packet's own order, and widened to 64 bits for the rest)."""
+    stable sort of the keys it makes: on the avx2 and avx512 builds the sort reads the
+    keys' high halves as made in vector registers (sort_packet of 32-bit keys: runs,
+    compact keys, the packet's own order, and widened to 64 bits for the rest)."""
     sorter = raysort.create("sorters", spec)
     base = inside_rays(rng, 600)
     sizes = [1, 3, 500, 1024, 0, 900, 48, 4096, 700]
@@ -433,7 +437,7 @@ def test_sorters_sort_rays_in_runs(spec, rng, each_isa):
     rays = rays.take(index)
     keys = sorter.keys(rays, BOX)
     assert np.all(np.diff(keys[last].astype(np.float64)) >= 0)
-    if each_isa in ("avx512", "avx512emu"):
+    if each_isa in VECTOR_KEYS:
         assert isa.module("sorters._keysort")._windows(sorter.coordinates, sorter._table,
                                                        sorter.octant)
     order, offsets = sorter.sort(rays, packets, BOX)
@@ -444,9 +448,9 @@ def test_sorters_sort_rays_in_runs(spec, rng, each_isa):
 
 @pytest.mark.parametrize("digits,split_bits", [(3, 0), (4, 12), (8, 40)])
 def test_sort_rays_is_sort_keys_of_make_keys(digits, split_bits, rng, each_isa):
-    """sort_rays (keys made packet by packet; on the avx512 builds their high halves
-    sorted as 32-bit keys where the split is within them) gives sort_keys' order and
-    cuts of make_keys' keys, for any digits and split."""
+    """sort_rays (keys made packet by packet; on the avx2 and avx512 builds their high
+    halves sorted as 32-bit keys where the split is within them) gives sort_keys' order
+    and cuts of make_keys' keys, for any digits and split."""
     module = isa.module("sorters._keysort")
     sorter = raysort.create("sorters", "two_point")
     base = inside_rays(rng, 300)
