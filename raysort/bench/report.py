@@ -23,7 +23,7 @@ from raysort.output import shown
 from raysort.stats import COUNTER_LABELS
 
 __all__ = ["SCHEMA", "bvh_settings", "chart_format", "draw_chart", "failures", "format_report",
-           "group_report", "load_average", "machine_info", "write_chart"]
+           "group_report", "load_average", "machine_info", "numpy_simd", "write_chart"]
 
 #: the JSON layout's name and version, written into every report
 SCHEMA = "raysort-bench/2"
@@ -37,6 +37,28 @@ PAPER_SIBENIK = {
                                  "tri4": 20.22},
 }
 SORT_STAGES = ("sort", "gather")
+
+
+def numpy_simd(features=None):
+    """The widest x86 SIMD level NumPy's own kernels (its sorts, which the key sorters
+    call, among them) run here: ``"avx512"``, ``"avx2"`` or ``"baseline"``, as the CPU
+    and ``NPY_DISABLE_CPU_FEATURES`` leave them (NumPy's run-time ``features``; None
+    where NumPy does not say).  It can differ from raysort's ISA: ``RAYSORT_ISA=avx2``
+    on an AVX-512 CPU leaves NumPy's AVX-512 sort in place."""
+    if features is None:
+        try:
+            from numpy._core._multiarray_umath import __cpu_features__ as features
+        except ImportError:         # NumPy 1.x
+            try:
+                from numpy.core._multiarray_umath import __cpu_features__ as features
+            except ImportError:
+                return None
+    # NumPy 2.4 groups the x86 levels (X86_V3, X86_V4); earlier releases name them
+    levels = (("avx512", "X86_V4"), ("avx2", "X86_V3")) if "X86_V4" in features else \
+        (("avx512", "AVX512_SKX"), ("avx2", "AVX2"))
+    if not any(name in features for _, name in levels):
+        return None                 # not an x86 build of NumPy
+    return next((level for level, name in levels if features.get(name)), "baseline")
 
 
 def machine_info():
@@ -53,7 +75,7 @@ def machine_info():
         pass
     return {"cpu": cpu, "cores": os.cpu_count(), "machine": platform.machine(),
             "python": platform.python_version(), "numpy": np.__version__,
-            "raysort": raysort.__version__, "isa": isa.active(),
+            "raysort": raysort.__version__, "isa": isa.active(), "numpy_simd": numpy_simd(),
             "isas_compiled": list(isa.compiled()), "platform": platform.platform()}
 
 
@@ -162,8 +184,9 @@ def format_report(report, stream=None):
         f"{s['repeat']} timed rounds{' after a warm-up round' if s['warmup'] else ''}, "
         f"order shuffled per round (seed {s['order_seed']}); median [min-max]")
     load = report["load"]
+    simd = f", NumPy's SIMD {m['numpy_simd']}" if m.get("numpy_simd") else ""
     say(f"machine: {m['cpu']} ({m['cores']} cores), ISA {m['isa']} (compiled "
-        f"{', '.join(m['isas_compiled'])}), Python {m['python']}; load average "
+        f"{', '.join(m['isas_compiled'])}){simd}, Python {m['python']}; load average "
         f"{load.get('before')} before, {load.get('after')} after")
     for name, g in report["groups"].items():
         rows = g["configs"]

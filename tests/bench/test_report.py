@@ -8,6 +8,7 @@ from raysort.bench.report import (
     failures,
     format_report,
     group_report,
+    numpy_simd,
     pivot,
     write_chart,
 )
@@ -139,3 +140,30 @@ def test_text_shows_undecodable_names_as_escapes():
     text = out.getvalue()
     assert "\\xff.ply (10 triangles" in text and "a \\xff" in text
     assert "\udcff" not in text
+
+
+@pytest.mark.parametrize("features,level", [
+    ({"X86_V2": True, "X86_V3": True, "X86_V4": True}, "avx512"),
+    ({"X86_V2": True, "X86_V3": True, "X86_V4": False, "AVX512F": True}, "avx2"),
+    ({"X86_V2": True, "X86_V3": False, "X86_V4": False, "AVX2": True}, "baseline"),
+    ({"AVX2": True, "AVX512F": True, "AVX512_SKX": True}, "avx512"),
+    ({"AVX2": True, "AVX512F": True, "AVX512_SKX": False}, "avx2"),
+    ({"AVX2": False, "AVX512_SKX": False, "SSE42": True}, "baseline"),
+    ({"ASIMD": True, "NEON": True}, None),
+])
+def test_numpy_simd_names_the_level_numpy_runs(features, level):
+    """NumPy 2.4's grouped levels (X86_V4 held off by NPY_DISABLE_CPU_FEATURES while
+    AVX512F stays set), the older feature names, and a NumPy that is not x86."""
+    assert numpy_simd(features) == level
+
+
+def test_machine_info_says_numpy_simd_and_the_header_shows_it(monkeypatch):
+    import raysort.bench.report as report_module
+    assert report_module.machine_info()["numpy_simd"] in ("avx512", "avx2", "baseline", None)
+    monkeypatch.setattr(report_module, "numpy_simd", lambda: "avx2")
+    machine = report_module.machine_info()
+    assert machine["numpy_simd"] == "avx2"
+    group = group_report(CONFIGS[:2], [row[:2] for row in SECONDS], [[0, 1]] * 3, rows()[:2])
+    out = io.StringIO()
+    format_report({**report(group), "machine": {**report(group)["machine"], **machine}}, out)
+    assert "NumPy's SIMD avx2" in out.getvalue()

@@ -37,5 +37,5 @@ def print_header(args, pipe):
     machine = machine_info()
     print(f"{args.scene} {args.size}x{args.size}, {args.spp} spp, "
           f"{' + '.join(str(v) for v in pipe.describe().values())}")
-    print(f"machine: {machine['cpu']} ({machine['cores']} cores), ISA {machine['isa']}, "
-          f"load average before: {load_average()}")
+    print(f"machine: {machine['cpu']} ({machine['cores']} cores), ISA {machine['isa']} "
+          f"(NumPy's SIMD {machine['numpy_simd']}), load average before: {load_average()}")

@@ -185,8 +185,9 @@ def main(argv=None):
     machine = machine_info()
     report = {"machine": machine, "load": {"before": load_average()}, "rounds": args.rounds,
               "size": args.size, "seed": args.seed, "rays": args.rays, "scenes": {}}
-    print(f"CPU {machine['cpu']}, {machine['cores']} cores, ISA {machine['isa']}, "
-          f"load {report['load']['before']}; thread-CPU ms, median [min-max] of "
+    print(f"CPU {machine['cpu']}, {machine['cores']} cores, ISA {machine['isa']} (NumPy's "
+          f"SIMD {machine['numpy_simd']}), load {report['load']['before']}; thread-CPU ms, "
+          f"median [min-max] of "
           f"{args.rounds} interleaved rounds; share = (sort + gather) / trace, per round")
     failed = False
     for j, spec in enumerate(args.scenes):
