@@ -583,34 +583,11 @@ cdef extern from *:
         pos[r] = n;
         return r;
     }
-    /* The rays of sorted runs (head[j] & idx = the run, at pos[run] .. pos[run + 1]),
-     * each run's in order after the last's, to out: sixteen at a time (up to 15 values
-     * past the last), a loop only for runs longer than sixteen rays (rare: the loop a
-     * run at a time, eight at a time, missed its exit once in four runs after a trace).
-     * The positions where the top bits (split) of the sorted keys change go to group
-     * (the first at 0, then n after the last); returns their number. */
-    static int rs_keysort_place_runs(const uint32_t *head, int runs, const int32_t *pos,
-                                     uint32_t idx, uint32_t split, int32_t start,
-                                     int32_t *out, int32_t *group)
+    /* out[0, 16) = first, first + 1, ...: a run's first sixteen rays, one store */
+    RS_INLINE void rs_keysort_iota16(int32_t *out, int32_t first)
     {
-        const __m512i iota = _mm512_loadu_si512((const void *)rs_keysort_lane16);
-        int at = 0, ng = 0;
-        uint32_t g = 0;
-        for (int j = 0; j < runs; ++j) {
-            uint32_t key = head[j];
-            int c = (int)(key & idx), first = pos[c], len = pos[c + 1] - first;
-            _mm512_storeu_si512((void *)(out + at),
-                                _mm512_add_epi32(iota, _mm512_set1_epi32(start + first)));
-            for (int k = 16; k < len; k += 16)
-                _mm512_storeu_si512((void *)(out + at + k),
-                                    _mm512_add_epi32(iota, _mm512_set1_epi32(start + first + k)));
-            group[ng] = at;             /* (overwritten unless a group starts here) */
-            ng += (j == 0) | ((key & split) != g);
-            g = key & split;
-            at += len;
-        }
-        group[ng] = at;
-        return ng;
+        _mm512_storeu_si512((void *)out, _mm512_add_epi32(
+            _mm512_loadu_si512((const void *)rs_keysort_lane16), _mm512_set1_epi32(first)));
     }
     #elif RS_ISA_AVX2
     /* eight values at a time, the first alone (k[-1] is not read) and the last few
@@ -645,26 +622,35 @@ cdef extern from *:
         pos[r] = n;
         return r;
     }
-    /* rs_keysort_place_runs with two eight-lane stores a run */
+    /* out[0, 16) = first, first + 1, ...: a run's first sixteen rays, two stores */
+    RS_INLINE void rs_keysort_iota16(int32_t *out, int32_t first)
+    {
+        const __m256i base = _mm256_set1_epi32(first);
+        _mm256_storeu_si256((__m256i *)out, _mm256_add_epi32(
+            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), base));
+        _mm256_storeu_si256((__m256i *)(out + 8), _mm256_add_epi32(
+            _mm256_setr_epi32(8, 9, 10, 11, 12, 13, 14, 15), base));
+    }
+    #endif
+    #if RS_ISA_AVX2
+    /* The rays of sorted runs (head[j] & idx = the run, at pos[run] .. pos[run + 1]),
+     * each run's in order after the last's, to out: sixteen at a time (up to 15 values
+     * past the last), a loop only for runs longer than sixteen rays (rare: the loop a
+     * run at a time, eight at a time, missed its exit once in four runs after a trace).
+     * The positions where the top bits (split) of the sorted keys change go to group
+     * (the first at 0, then n after the last); returns their number. */
     static int rs_keysort_place_runs(const uint32_t *head, int runs, const int32_t *pos,
                                      uint32_t idx, uint32_t split, int32_t start,
                                      int32_t *out, int32_t *group)
     {
-        const __m256i iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
-                      iota8 = _mm256_setr_epi32(8, 9, 10, 11, 12, 13, 14, 15);
         int at = 0, ng = 0;
         uint32_t g = 0;
         for (int j = 0; j < runs; ++j) {
             uint32_t key = head[j];
             int c = (int)(key & idx), first = pos[c], len = pos[c + 1] - first;
-            __m256i base = _mm256_set1_epi32(start + first);
-            _mm256_storeu_si256((__m256i *)(out + at), _mm256_add_epi32(iota, base));
-            _mm256_storeu_si256((__m256i *)(out + at + 8), _mm256_add_epi32(iota8, base));
-            for (int k = 16; k < len; k += 16) {
-                base = _mm256_set1_epi32(start + first + k);
-                _mm256_storeu_si256((__m256i *)(out + at + k), _mm256_add_epi32(iota, base));
-                _mm256_storeu_si256((__m256i *)(out + at + k + 8), _mm256_add_epi32(iota8, base));
-            }
+            rs_keysort_iota16(out + at, start + first);
+            for (int k = 16; k < len; k += 16)
+                rs_keysort_iota16(out + at + k, start + first + k);
             group[ng] = at;             /* (overwritten unless a group starts here) */
             ng += (j == 0) | ((key & split) != g);
             g = key & split;
