@@ -105,12 +105,25 @@ cdef inline int rays_bad(const int32_t *order, Py_ssize_t a, Py_ssize_t b, int32
     here: n positions whose rays all lie in ``[0, n)`` hold each ray once exactly when
     every ray is marked (:func:`all_marked`).  The stores alone, without a load of the
     byte each one writes, took 0.84-0.92x the whole check's time (the orders ``nah``
-    and ``two_point`` give shadow and diffuse rays, AVX-512)."""
-    cdef Py_ssize_t i
+    and ``two_point`` give shadow and diffuse rays, AVX-512); eight a loop iteration
+    (the compiler unrolls none of it) 0.68-0.75x of that (camera, shadow and diffuse
+    rays, the same orders, AVX2 and AVX-512)."""
+    cdef Py_ssize_t i = a
     if range_bad(order, a, b, lo, hi):
         return 1
-    for i in range(a, b):
+    while i + 8 <= b:
         seen[order[i]] = 1
+        seen[order[i + 1]] = 1
+        seen[order[i + 2]] = 1
+        seen[order[i + 3]] = 1
+        seen[order[i + 4]] = 1
+        seen[order[i + 5]] = 1
+        seen[order[i + 6]] = 1
+        seen[order[i + 7]] = 1
+        i += 8
+    while i < b:
+        seen[order[i]] = 1
+        i += 1
     return 0
 
 
