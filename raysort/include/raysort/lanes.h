@@ -253,10 +253,6 @@ static const uint32_t rs_compress8[256] = {
     0x00765421, 0x07654210, 0x00076543, 0x00765430, 0x00765431, 0x07654310,
     0x00765432, 0x07654320, 0x07654321, 0x76543210,
 };
-/* Append the ids of the lanes in `bits` to out[*n] (out has RS_SW slots of
- * slack): one lane permutation and one store, as AVX-512's compress.  The eight
- * scalar stores it replaces took 28 % of the stream filter's samples on Zen 3
- * (BENCHMARKS.md section 14). */
 /* The permutation (for VPERMD) that moves the lanes set in `bits` to the bottom,
  * lowest first: AVX-512's compress on eight lanes. */
 RS_INLINE __m256i sw_compress_lanes(int bits)
@@ -265,6 +261,10 @@ RS_INLINE __m256i sw_compress_lanes(int bits)
                                      _mm256_setr_epi32(0, 4, 8, 12, 16, 20, 24, 28));
     return _mm256_and_si256(lane, _mm256_set1_epi32(7));
 }
+/* Append the ids of the lanes in `bits` to out[*n] (out has RS_SW slots of
+ * slack): one lane permutation and one store, as AVX-512's compress.  The eight
+ * scalar stores it replaces took 28 % of the stream filter's samples on Zen 3
+ * (BENCHMARKS.md section 14). */
 RS_INLINE void sw_append(int32_t *out, int *n, rs_swi id, int bits)
 {
     _mm256_storeu_si256((__m256i *)(out + *n),
