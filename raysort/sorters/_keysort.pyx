@@ -121,6 +121,14 @@ cdef extern from *:
         return _mm512_cvttps_epi32(_mm512_mul_ps(x, scale));
     }
     #endif
+    #if RS_ISA_AVX2
+    /* the same, eight lanes (the quantiser's AVX2 tail and the avx2 build's window keys) */
+    static inline __m256i rs_keysort_quantise8(__m256 c, __m256 scale)
+    {
+        __m256 x = _mm256_min_ps(_mm256_max_ps(c, _mm256_setzero_ps()), _mm256_set1_ps(1.0f));
+        return _mm256_cvttps_epi32(_mm256_mul_ps(x, scale));
+    }
+    #endif
     static inline void rs_keysort_quantise(const float *c, int32_t *q, int m)
     {
         int j = 0;
@@ -130,12 +138,9 @@ cdef extern from *:
                                                                         _mm512_set1_ps(65535.0f)));
     #endif
     #if RS_ISA_AVX2
-        const __m256 zero8 = _mm256_setzero_ps(), one8 = _mm256_set1_ps(1.0f),
-                     qmax8 = _mm256_set1_ps(65535.0f);
-        for (; j + 8 <= m; j += 8) {
-            __m256 x = _mm256_min_ps(_mm256_max_ps(_mm256_loadu_ps(c + j), zero8), one8);
-            _mm256_storeu_si256((__m256i *)(q + j), _mm256_cvttps_epi32(_mm256_mul_ps(x, qmax8)));
-        }
+        for (; j + 8 <= m; j += 8)
+            _mm256_storeu_si256((__m256i *)(q + j), rs_keysort_quantise8(_mm256_loadu_ps(c + j),
+                                                                         _mm256_set1_ps(65535.0f)));
     #endif
     #if RS_SSE
         const __m128 zero = _mm_setzero_ps(), one = _mm_set1_ps(1.0f), qmax = _mm_set1_ps(65535.0f);
@@ -459,14 +464,13 @@ cdef extern from *:
                                          const float *dx, const float *dy, const float *dz,
                                          int octant, int j, int masked, __m256i mask)
     {
-        const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.0f);
+        const __m256 zero = _mm256_setzero_ps();
         __m256i h = _mm256_setzero_si256();
         for (int t = 0; t < n_tables; ++t) {
             __m256 c = masked ? _mm256_maskload_ps(row[t] + j, mask)
                               : _mm256_loadu_ps(row[t] + j);
-            __m256 x = _mm256_min_ps(_mm256_max_ps(c, zero), one);   /* as quantise */
             h = _mm256_or_si256(h, _mm256_permutevar8x32_epi32(
-                table[t], _mm256_cvttps_epi32(_mm256_mul_ps(x, scale[t]))));
+                table[t], rs_keysort_quantise8(c, scale[t])));
         }
         if (octant) {
             const float *d[3] = {dx, dy, dz};
